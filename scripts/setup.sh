@@ -1,0 +1,30 @@
+#!/usr/bin/env bash
+# Installs every build and test dependency of d2gs from Debian packages. Idempotent: packages already
+# present are left alone, and nothing is downloaded from anywhere but the Debian archive.
+set -euo pipefail
+
+packages=(
+  build-essential cmake ninja-build pkg-config
+  libglm-dev libnanoflann-dev nlohmann-json3-dev libcli11-dev libspdlog-dev libfmt-dev
+  libomp-dev
+  libopencv-core-dev libopencv-imgproc-dev libopencv-imgcodecs-dev
+  libopencv-features2d-dev libopencv-calib3d-dev
+  libgtest-dev libgmock-dev libbenchmark-dev
+  python3 python3-numpy
+)
+
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+
+if ((${#missing[@]})); then
+  echo "setup: installing ${missing[*]}"
+  SUDO=""
+  if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+  export DEBIAN_FRONTEND=noninteractive
+  $SUDO apt-get update -qq
+  $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+else
+  echo "setup: all dependencies present"
+fi

@@ -1,0 +1,16 @@
+#pragma once
+// One file per subcommand; each registers itself on the top-level CLI11 app and returns the callback
+// that runs it. Callbacks throw d2gs::Error on bad input; main() turns that into one line and exit 1.
+#include <functional>
+
+#include <CLI/CLI.hpp>
+
+namespace d2gs::cli {
+
+using Run = std::function<int()>;
+
+Run add_info_command(CLI::App& app);
+Run add_demo_command(CLI::App& app);
+Run add_render_command(CLI::App& app);
+
+}  // namespace d2gs::cli

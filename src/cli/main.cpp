@@ -1,0 +1,53 @@
+// d2gs: sparse-view 3D Gaussian Splatting (D²GS) from the command line.
+#include <cstdio>
+#include <exception>
+#include <map>
+#include <string>
+
+#include "cli/commands.hpp"
+#include "d2gs/core/error.hpp"
+#include "d2gs/core/log.hpp"
+
+int main(int argc, char** argv) {
+  CLI::App app{
+      "d2gs: sparse-view 3D Gaussian Splatting with depth-and-density guided dropout (D2GS).\n"
+      "Run `d2gs COMMAND --help` for the options of one command.",
+      "d2gs"};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", "d2gs 0.1.0");
+  bool quiet = false, verbose = false;
+  app.add_flag("-q,--quiet", quiet, "Only print errors (no progress lines)");
+  app.add_flag("-v,--verbose", verbose, "Print debug messages");
+
+  std::map<const CLI::App*, d2gs::cli::Run> runs;
+  const auto add = [&](d2gs::cli::Run (*adder)(CLI::App&)) {
+    const auto before = app.get_subcommands([](const CLI::App*) { return true; }).size();
+    auto run = adder(app);
+    const auto subs = app.get_subcommands([](const CLI::App*) { return true; });
+    if (subs.size() > before) runs[subs.back()] = std::move(run);
+  };
+  add(d2gs::cli::add_info_command);
+  add(d2gs::cli::add_render_command);
+  add(d2gs::cli::add_demo_command);
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+  d2gs::set_verbosity(quiet ? d2gs::Verbosity::Quiet : verbose ? d2gs::Verbosity::Verbose : d2gs::Verbosity::Normal);
+  try {
+    for (const auto& [sub, run] : runs)
+      if (sub->parsed()) return run();
+    return 2;
+  } catch (const d2gs::Error& e) {
+    std::fprintf(stderr, "d2gs: error: %s\n", e.what());
+    return 1;
+  } catch (const std::bad_alloc&) {
+    std::fprintf(stderr, "d2gs: error: out of memory\n");
+    return 1;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "d2gs: error: internal: %s\n", e.what());
+    return 3;
+  }
+}

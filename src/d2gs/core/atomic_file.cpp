@@ -1,0 +1,112 @@
+#include "d2gs/core/atomic_file.hpp"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <cerrno>
+#include <cstring>
+#include <sstream>
+#include <system_error>
+
+#include "d2gs/core/error.hpp"
+
+namespace d2gs {
+namespace fs = std::filesystem;
+
+namespace {
+
+fs::path temporary_name(const fs::path& destination) {
+  static std::atomic<unsigned> counter{0};
+  const auto stem = destination.stem().string();
+  const auto ext = destination.extension().string();
+  return destination.parent_path() /
+         fmt::format(".{}.tmp{}-{}{}", stem, static_cast<long>(::getpid()), counter++, ext);
+}
+
+void ensure_parent(const fs::path& destination) {
+  const auto parent = destination.parent_path();
+  if (parent.empty()) return;
+  std::error_code ec;
+  fs::create_directories(parent, ec);
+  if (ec) fail_file(parent, "cannot create folder: {}", ec.message());
+}
+
+void sync_file(const fs::path& path) {
+  const int fd = ::open(path.c_str(), O_RDONLY);
+  if (fd < 0) return;
+  (void)::fsync(fd);
+  ::close(fd);
+}
+
+void rename_into_place(const fs::path& temporary, const fs::path& destination) {
+  std::error_code ec;
+  fs::rename(temporary, destination, ec);
+  if (ec) {
+    fs::remove(temporary, ec);
+    fail_file(destination, "cannot write: {}", std::strerror(errno));
+  }
+}
+
+}  // namespace
+
+AtomicFile::AtomicFile(fs::path destination)
+    : destination_(std::move(destination)), temporary_(temporary_name(destination_)) {
+  ensure_parent(destination_);
+  stream_.open(temporary_, std::ios::binary | std::ios::trunc);
+  if (!stream_) fail_file(destination_, "cannot open for writing: {}", std::strerror(errno));
+}
+
+AtomicFile::~AtomicFile() {
+  if (!committed_) {
+    stream_.close();
+    std::error_code ec;
+    fs::remove(temporary_, ec);
+  }
+}
+
+void AtomicFile::commit() {
+  stream_.flush();
+  const bool ok = static_cast<bool>(stream_);
+  stream_.close();
+  if (!ok) fail_file(destination_, "write failed (disk full?)");
+  sync_file(temporary_);
+  rename_into_place(temporary_, destination_);
+  committed_ = true;
+}
+
+void write_file_atomic(const fs::path& path, std::string_view bytes) {
+  AtomicFile file(path);
+  file.stream().write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+  file.commit();
+}
+
+void write_file_atomic_with(const fs::path& path, const std::function<void(const fs::path&)>& write) {
+  ensure_parent(path);
+  const auto temporary = temporary_name(path);
+  try {
+    write(temporary);
+  } catch (...) {
+    std::error_code ec;
+    fs::remove(temporary, ec);
+    throw;
+  }
+  std::error_code ec;
+  if (!fs::exists(temporary, ec)) fail_file(path, "writer produced no file");
+  sync_file(temporary);
+  rename_into_place(temporary, path);
+}
+
+std::string read_file(const fs::path& path) {
+  std::error_code ec;
+  if (!fs::exists(path, ec)) fail_file(path, "file not found");
+  if (fs::is_directory(path, ec)) fail_file(path, "is a folder, expected a file");
+  std::ifstream in(path, std::ios::binary);
+  if (!in) fail_file(path, "cannot open: {}", std::strerror(errno));
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  if (in.bad()) fail_file(path, "read error");
+  return std::move(ss).str();
+}
+
+}  // namespace d2gs

@@ -1,0 +1,40 @@
+#pragma once
+// Atomic output: every file d2gs writes (models, images, JSON, checkpoints) goes to a temporary file in
+// the destination folder and is renamed over the destination only once it is complete and flushed. A
+// run killed at any moment leaves either the old file or the new one, never half of one.
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <string_view>
+
+namespace d2gs {
+
+class AtomicFile {
+public:
+  explicit AtomicFile(std::filesystem::path destination);
+  ~AtomicFile();  // removes the temporary file unless commit() succeeded
+  AtomicFile(const AtomicFile&) = delete;
+  AtomicFile& operator=(const AtomicFile&) = delete;
+
+  std::ofstream& stream() { return stream_; }
+  const std::filesystem::path& temporary_path() const { return temporary_; }
+  // Flushes, syncs and renames the temporary file onto the destination. Throws d2gs::Error on failure.
+  void commit();
+
+private:
+  std::filesystem::path destination_;
+  std::filesystem::path temporary_;
+  std::ofstream stream_;
+  bool committed_ = false;
+};
+
+// Writes `bytes` to `path` atomically.
+void write_file_atomic(const std::filesystem::path& path, std::string_view bytes);
+// Calls `write(temporary_path)` to produce the file under a temporary name (same extension, so that
+// writers choosing a format by extension still work), then renames it onto `path`.
+void write_file_atomic_with(const std::filesystem::path& path,
+                            const std::function<void(const std::filesystem::path&)>& write);
+// Reads a whole file; throws d2gs::Error naming the file when it cannot be read.
+std::string read_file(const std::filesystem::path& path);
+
+}  // namespace d2gs

@@ -1,0 +1,146 @@
+#include "d2gs/core/image.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <fstream>
+
+#include <opencv2/core.hpp>
+#include <opencv2/imgcodecs.hpp>
+#include <opencv2/imgproc.hpp>
+
+#include "d2gs/core/atomic_file.hpp"
+#include "d2gs/core/error.hpp"
+
+namespace d2gs {
+namespace fs = std::filesystem;
+
+namespace {
+
+Image from_mat(const cv::Mat& decoded, const fs::path& path) {
+  cv::Mat m = decoded;
+  double scale = 1.0;
+  switch (m.depth()) {
+    case CV_8U: scale = 1.0 / 255.0; break;
+    case CV_16U: scale = 1.0 / 65535.0; break;
+    case CV_32F: scale = 1.0; break;
+    default: fail_file(path, "unsupported pixel depth");
+  }
+  const int c = m.channels();
+  if (c == 3) cv::cvtColor(m, m, cv::COLOR_BGR2RGB);
+  else if (c == 4) cv::cvtColor(m, m, cv::COLOR_BGRA2RGBA);
+  else if (c != 1) fail_file(path, "unsupported channel count {}", c);
+  cv::Mat f;
+  m.convertTo(f, CV_32F, scale);
+  Image out(f.cols, f.rows, c);
+  for (int y = 0; y < f.rows; ++y) {
+    const float* row = f.ptr<float>(y);
+    std::copy(row, row + static_cast<std::size_t>(f.cols) * c, out.pixels.begin() + static_cast<std::ptrdiff_t>(y) * f.cols * c);
+  }
+  return out;
+}
+
+cv::Mat to_mat(const Image& image) {
+  const int type = CV_MAKETYPE(CV_32F, image.channels);
+  return cv::Mat(image.height, image.width, type, const_cast<float*>(image.pixels.data()));
+}
+
+std::uint32_t be32(const unsigned char* p) {
+  return (std::uint32_t{p[0]} << 24) | (std::uint32_t{p[1]} << 16) | (std::uint32_t{p[2]} << 8) | p[3];
+}
+
+}  // namespace
+
+Image read_image(const fs::path& path) {
+  std::error_code ec;
+  if (!fs::exists(path, ec)) fail_file(path, "image not found");
+  cv::Mat m;
+  try {
+    m = cv::imread(path.string(), cv::IMREAD_UNCHANGED);
+  } catch (const cv::Exception& e) {
+    fail_file(path, "cannot decode image ({})", e.err);
+  }
+  if (m.empty()) fail_file(path, "cannot decode image (corrupt or unsupported format)");
+  return from_mat(m, path);
+}
+
+ImageSize read_image_size(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) fail_file(path, "image not found");
+  unsigned char head[32] = {};
+  in.read(reinterpret_cast<char*>(head), sizeof head);
+  const auto got = in.gcount();
+  static constexpr unsigned char png_magic[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+  if (got >= 24 && std::equal(png_magic, png_magic + 8, head)) {
+    if (!std::equal(head + 12, head + 16, reinterpret_cast<const unsigned char*>("IHDR")))
+      fail_file(path, "corrupt PNG header");
+    const auto w = be32(head + 16), h = be32(head + 20);
+    if (w == 0 || h == 0 || w > 1u << 16 || h > 1u << 16) fail_file(path, "corrupt PNG header (size {}x{})", w, h);
+    return {static_cast<int>(w), static_cast<int>(h)};
+  }
+  if (got >= 4 && head[0] == 0xFF && head[1] == 0xD8) {
+    // JPEG: walk the markers to the first start-of-frame.
+    in.clear();
+    in.seekg(2);
+    for (int guard = 0; guard < 1000 && in; ++guard) {
+      int b = in.get();
+      while (b != 0xFF && in) b = in.get();
+      while (b == 0xFF && in) b = in.get();
+      if (!in) break;
+      const int marker = b;
+      if (marker == 0xD8 || (marker >= 0xD0 && marker <= 0xD7) || marker == 0x01) continue;
+      unsigned char len_bytes[2];
+      if (!in.read(reinterpret_cast<char*>(len_bytes), 2)) break;
+      const int len = (len_bytes[0] << 8) | len_bytes[1];
+      if (len < 2) break;
+      const bool sof = marker >= 0xC0 && marker <= 0xCF && marker != 0xC4 && marker != 0xC8 && marker != 0xCC;
+      if (sof) {
+        unsigned char sofb[5];
+        if (!in.read(reinterpret_cast<char*>(sofb), 5)) break;
+        const int h = (sofb[1] << 8) | sofb[2], w = (sofb[3] << 8) | sofb[4];
+        if (w <= 0 || h <= 0) break;
+        return {w, h};
+      }
+      in.seekg(len - 2, std::ios::cur);
+    }
+    fail_file(path, "corrupt JPEG header");
+  }
+  const Image decoded = read_image(path);
+  return {decoded.width, decoded.height};
+}
+
+Image resize_area(const Image& image, int width, int height) {
+  if (width <= 0 || height <= 0) fail("resize_area: invalid target size {}x{}", width, height);
+  cv::Mat dst;
+  cv::resize(to_mat(image), dst, cv::Size(width, height), 0, 0, cv::INTER_AREA);
+  Image out(width, height, image.channels);
+  for (int y = 0; y < height; ++y) {
+    const float* row = dst.ptr<float>(y);
+    std::copy(row, row + static_cast<std::size_t>(width) * image.channels,
+              out.pixels.begin() + static_cast<std::ptrdiff_t>(y) * width * image.channels);
+  }
+  return out;
+}
+
+void write_image(const fs::path& path, const Image& image) {
+  if (image.channels != 1 && image.channels != 3 && image.channels != 4)
+    fail_file(path, "cannot write an image with {} channels", image.channels);
+  cv::Mat m;
+  to_mat(image).convertTo(m, CV_8U, 255.0);  // saturates: clamps to [0,255] and rounds
+  if (image.channels == 3) cv::cvtColor(m, m, cv::COLOR_RGB2BGR);
+  if (image.channels == 4) cv::cvtColor(m, m, cv::COLOR_RGBA2BGRA);
+  write_file_atomic_with(path, [&](const fs::path& tmp) {
+    if (!cv::imwrite(tmp.string(), m)) fail_file(path, "cannot encode image");
+  });
+}
+
+void write_png16(const fs::path& path, const Image& image, float scale) {
+  if (image.channels != 1) fail_file(path, "16-bit PNG output takes one channel, got {}", image.channels);
+  cv::Mat m;
+  to_mat(image).convertTo(m, CV_16U, scale);
+  write_file_atomic_with(path, [&](const fs::path& tmp) {
+    if (!cv::imwrite(tmp.string(), m)) fail_file(path, "cannot encode image");
+  });
+}
+
+}  // namespace d2gs

@@ -1,0 +1,42 @@
+#pragma once
+// Images in memory: float32, interleaved channels, row-major (height x width x channels), values in
+// [0, 1]. File I/O goes through OpenCV's codecs (PNG, JPEG, ...); colour order in memory is RGB(A).
+#include <cstddef>
+#include <filesystem>
+#include <vector>
+
+namespace d2gs {
+
+struct Image {
+  int width = 0;
+  int height = 0;
+  int channels = 0;
+  std::vector<float> pixels;  // size width * height * channels
+
+  Image() = default;
+  Image(int w, int h, int c, float fill = 0.0f)
+      : width(w), height(h), channels(c), pixels(static_cast<std::size_t>(w) * h * c, fill) {}
+  float& at(int x, int y, int c) { return pixels[(static_cast<std::size_t>(y) * width + x) * channels + c]; }
+  float at(int x, int y, int c) const {
+    return pixels[(static_cast<std::size_t>(y) * width + x) * channels + c];
+  }
+  bool empty() const { return pixels.empty(); }
+};
+
+struct ImageSize {
+  int width = 0;
+  int height = 0;
+};
+
+// Decodes an image file to float [0,1] RGB or RGBA (8- and 16-bit sources). Errors name the file.
+Image read_image(const std::filesystem::path& path);
+// Reads only the header of a PNG or JPEG file (falls back to decoding other formats).
+ImageSize read_image_size(const std::filesystem::path& path);
+// Area (box-average) resampling to the given size, as OpenCV's INTER_AREA.
+Image resize_area(const Image& image, int width, int height);
+// Writes 8-bit PNG/JPEG (by extension) atomically; values are clamped to [0,1] and rounded.
+void write_image(const std::filesystem::path& path, const Image& image);
+// Writes a single-channel image as a 16-bit PNG atomically: value v is stored as round(v * scale).
+void write_png16(const std::filesystem::path& path, const Image& image, float scale);
+
+}  // namespace d2gs

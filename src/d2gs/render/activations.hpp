@@ -1,0 +1,12 @@
+#pragma once
+// Parameter activations of method.md §2 (shared by the CPU and CUDA backends).
+#include <cmath>
+
+#include "d2gs/render/host_device.hpp"
+
+namespace d2gs {
+
+D2GS_HD float sigmoid(float x) { return 1.0f / (1.0f + expf(-x)); }
+D2GS_HD float inverse_sigmoid(float y) { return logf(y / (1.0f - y)); }
+
+}  // namespace d2gs

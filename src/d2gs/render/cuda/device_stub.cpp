@@ -1,0 +1,9 @@
+// Built when the CUDA backend is off: the same API reports that no GPU is available.
+#include "d2gs/core/error.hpp"
+#include "d2gs/render/cuda/device.hpp"
+
+namespace d2gs::cuda {
+int device_count() { return 0; }
+std::string describe_device() { return "this d2gs was built without CUDA"; }
+std::vector<float> sigmoid_on_device(const std::vector<float>&) { fail("CUDA: {}", describe_device()); }
+}  // namespace d2gs::cuda

@@ -1,0 +1,58 @@
+#include <gtest/gtest.h>
+
+#include "d2gs/core/atomic_file.hpp"
+#include "d2gs/core/error.hpp"
+#include "d2gs/core/image.hpp"
+#include "test_paths.hpp"
+
+namespace d2gs {
+namespace {
+
+TEST(Image, PngRoundTripIsExactAt8Bits) {
+  const auto dir = test::scratch_dir();
+  Image img(5, 3, 3);
+  for (std::size_t i = 0; i < img.pixels.size(); ++i) img.pixels[i] = static_cast<float>((i * 37) % 256) / 255.0f;
+  write_image(dir / "a.png", img);
+  const Image back = read_image(dir / "a.png");
+  ASSERT_EQ(back.width, 5);
+  ASSERT_EQ(back.height, 3);
+  ASSERT_EQ(back.channels, 3);
+  for (std::size_t i = 0; i < img.pixels.size(); ++i) EXPECT_FLOAT_EQ(back.pixels[i], img.pixels[i]);
+  const auto size = read_image_size(dir / "a.png");
+  EXPECT_EQ(size.width, 5);
+  EXPECT_EQ(size.height, 3);
+}
+
+TEST(Image, HeaderSizeOfRealPngAndJpeg) {
+  const auto fern = read_image_size(test::shared_data() / "nerf_llff_data/fern/images_8/image000.png");
+  EXPECT_EQ(fern.width, 504);
+  EXPECT_EQ(fern.height, 378);
+  const auto room = read_image_size(test::shared_data() / "llff_nex_reprocessed/room/images/img001.JPG");
+  const auto decoded = read_image(test::shared_data() / "llff_nex_reprocessed/room/images/img001.JPG");
+  EXPECT_EQ(room.width, decoded.width);
+  EXPECT_EQ(room.height, decoded.height);
+}
+
+TEST(Image, RgbOrderAndAreaResize) {
+  const Image fern = read_image(test::shared_data() / "nerf_llff_data/fern/images_4/image000.png");
+  const Image half = resize_area(fern, fern.width / 2, fern.height / 2);
+  // Area resampling by 2 is the mean of each 2x2 block.
+  const float expect = 0.25f * (fern.at(10, 6, 0) + fern.at(11, 6, 0) + fern.at(10, 7, 0) + fern.at(11, 7, 0));
+  EXPECT_NEAR(half.at(5, 3, 0), expect, 1e-6f);
+}
+
+TEST(Image, CorruptAndMissingFilesAreErrors) {
+  const auto dir = test::scratch_dir();
+  write_file_atomic(dir / "bad.png", "\x89PNG\r\n\x1a\nthis is not a png");
+  EXPECT_THROW(read_image(dir / "bad.png"), Error);
+  EXPECT_THROW(read_image_size(dir / "bad.png"), Error);
+  EXPECT_THROW(read_image(dir / "missing.png"), Error);
+  try {
+    read_image(dir / "bad.png");
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("bad.png"), std::string::npos);
+  }
+}
+
+}  // namespace
+}  // namespace d2gs

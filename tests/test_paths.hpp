@@ -1,0 +1,48 @@
+#pragma once
+// Paths every test may use, and a scratch folder per test.
+#include <sys/wait.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <string>
+
+#include <gtest/gtest.h>
+
+namespace d2gs::test {
+
+inline std::filesystem::path source_dir() { return D2GS_SOURCE_DIR; }
+// The real scenes of ../shared/data (fern, room, lego). Tests fail if they are missing: CI has them.
+inline std::filesystem::path shared_data() { return D2GS_SHARED_DATA_DIR; }
+inline std::filesystem::path cli_path() { return D2GS_CLI_PATH; }
+
+// A fresh empty folder for the running test, removed at the start of the next run with that name.
+inline std::filesystem::path scratch_dir() {
+  const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+  auto dir = std::filesystem::temp_directory_path() / "d2gs-tests" /
+             (std::string(info->test_suite_name()) + "." + info->name());
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  return dir;
+}
+
+struct CommandResult {
+  int exit_code = -1;
+  std::string output;  // stdout and stderr together
+};
+
+// Runs the d2gs program with the given argument string (shell syntax) and captures its output.
+inline CommandResult run_cli(const std::string& args) {
+  CommandResult result;
+  const std::string command = "'" + cli_path().string() + "' " + args + " 2>&1 </dev/null";
+  FILE* pipe = ::popen(command.c_str(), "r");
+  if (!pipe) return result;
+  char buffer[4096];
+  std::size_t n;
+  while ((n = std::fread(buffer, 1, sizeof buffer, pipe)) > 0) result.output.append(buffer, n);
+  const int status = ::pclose(pipe);
+  result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+  return result;
+}
+
+}  // namespace d2gs::test
