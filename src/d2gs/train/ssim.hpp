@@ -1,0 +1,39 @@
+#pragma once
+// SSIM exactly as the 3DGS code and method.md §6: 11×11 Gaussian window (σ = 1.5), per channel, zero
+// padding with "same" output size, C1 = 0.01², C2 = 0.03², mean of the SSIM map over C·H·W.
+// The backward pass is written by hand (tests check it against finite differences in double).
+//
+// Images are interleaved H×W×C (as d2gs::Image). The window is separable, so every local mean is two
+// 1-D passes; the adjoint of a zero-padded "same" filter with a symmetric kernel is the same filter.
+#include <vector>
+
+namespace d2gs {
+
+inline constexpr int kSsimWindow = 11;
+inline constexpr double kSsimSigma = 1.5;
+inline constexpr double kSsimC1 = 0.01 * 0.01;
+inline constexpr double kSsimC2 = 0.03 * 0.03;
+
+// Reusable buffers for SSIM on images of one size (no allocation after the first call).
+template <typename T>
+class Ssim {
+public:
+  // Mean SSIM of `a` against `b`. When `grad_a` is non-null it receives d(mean SSIM)/d a (same layout),
+  // scaled by `grad_scale` (e.g. −0.2 for the loss term 0.2·(1 − SSIM)).
+  T evaluate(const T* a, const T* b, int width, int height, int channels, T* grad_a = nullptr,
+             T grad_scale = T(1));
+
+private:
+  void resize(int width, int height);
+  void blur(const T* in, T* out);  // planar, one channel
+  int width_ = 0, height_ = 0;
+  std::vector<T> a_, b_, mu_a_, mu_b_, s_aa_, s_bb_, s_ab_, tmp_, row_, d_mu_, d_saa_, d_sab_, acc_;
+};
+
+// Convenience: mean SSIM of two images (float inputs, double arithmetic).
+double ssim(const float* a, const float* b, int width, int height, int channels);
+
+extern template class Ssim<float>;
+extern template class Ssim<double>;
+
+}  // namespace d2gs
