@@ -1,0 +1,166 @@
+#include "d2gs/train/densify.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include "d2gs/core/error.hpp"
+#include "d2gs/model/rows.hpp"
+#include "d2gs/render/activations.hpp"
+
+namespace d2gs {
+namespace {
+
+float max_scale(const Gaussians& g, std::size_t i) {
+  return std::exp(std::max({g.log_scales[i * 3], g.log_scales[i * 3 + 1], g.log_scales[i * 3 + 2]}));
+}
+
+// Rotation matrix (row-major) of the normalised quaternion (w, x, y, z).
+void rotation(const float* q, float R[9]) {
+  const float n = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+  const float w = q[0] / n, x = q[1] / n, y = q[2] / n, z = q[3] / n;
+  R[0] = 1 - 2 * (y * y + z * z); R[1] = 2 * (x * y - w * z);     R[2] = 2 * (x * z + w * y);
+  R[3] = 2 * (x * y + w * z);     R[4] = 1 - 2 * (x * x + z * z); R[5] = 2 * (y * z - w * x);
+  R[6] = 2 * (x * z - w * y);     R[7] = 2 * (y * z + w * x);     R[8] = 1 - 2 * (x * x + y * y);
+}
+
+void append_zero_moments(AdamState& adam, std::size_t count) {
+  Gaussians zeros;
+  zeros.resize(count, adam.exp_avg.sh_degree);
+  zero_values(zeros);
+  append_rows(adam.exp_avg, zeros);
+  append_rows(adam.exp_avg_sq, zeros);
+}
+
+void keep_everywhere(Gaussians& model, AdamState& adam, const std::vector<std::uint8_t>& keep,
+                     std::vector<std::uint32_t>& source) {
+  keep_rows(model, keep);
+  keep_rows(adam.exp_avg, keep);
+  keep_rows(adam.exp_avg_sq, keep);
+  std::size_t out = 0;
+  for (std::size_t i = 0; i < keep.size(); ++i)
+    if (keep[i]) source[out++] = source[i];
+  source.resize(out);
+}
+
+void check_aligned(const Gaussians& model, const AdamState& adam, const GradientStats& stats) {
+  if (adam.exp_avg.size() != model.size() || adam.exp_avg_sq.size() != model.size() || stats.size() != model.size())
+    fail("densification: model ({}), moments ({}, {}) and statistics ({}) are not aligned", model.size(),
+         adam.exp_avg.size(), adam.exp_avg_sq.size(), stats.size());
+}
+
+}  // namespace
+
+void GradientStats::reset(std::size_t n) {
+  sum_.assign(n, 0.0f);
+  count_.assign(n, 0.0f);
+}
+
+void GradientStats::add(const std::vector<float>& grad, const std::vector<int>& radii) {
+  const std::size_t n = sum_.size();
+  if (grad.size() != 2 * n || radii.size() != n)
+    fail("gradient statistics: {} gradients / {} radii for {} Gaussians", grad.size() / 2, radii.size(), n);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (radii[i] <= 0) continue;
+    sum_[i] += std::sqrt(grad[2 * i] * grad[2 * i] + grad[2 * i + 1] * grad[2 * i + 1]);
+    count_[i] += 1.0f;
+  }
+}
+
+std::vector<float> GradientStats::mean() const {
+  std::vector<float> m(sum_.size(), 0.0f);
+  for (std::size_t i = 0; i < m.size(); ++i) m[i] = count_[i] > 0 ? sum_[i] / count_[i] : 0.0f;
+  return m;
+}
+
+DensifyReport densify_and_prune(Gaussians& model, AdamState& adam, GradientStats& stats, float extent,
+                                const DensifyOptions& opt, Rng& rng) {
+  check_aligned(model, adam, stats);
+  if (opt.split_children < 1) fail("densification: split_children must be at least 1");
+  DensifyReport report;
+  const std::size_t n = model.size();
+  report.before = n;
+  const auto grads = stats.mean();
+  const float size_limit = opt.percent_dense * extent;
+
+  std::vector<std::uint32_t> clone_idx, split_idx;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!(grads[i] >= opt.grad_threshold)) continue;
+    (max_scale(model, i) <= size_limit ? clone_idx : split_idx).push_back(static_cast<std::uint32_t>(i));
+  }
+
+  // Split children: parent mean + R(parent)·(scale ⊙ n), n ~ N(0, I); scale / (0.8·children).
+  const Gaussians parents = gather_rows(model, split_idx);
+  Gaussians children;
+  children.resize(0, model.sh_degree);
+  std::vector<std::uint32_t> child_source;
+  const float shrink = std::log(0.8f * static_cast<float>(opt.split_children));
+  for (int copy = 0; copy < opt.split_children; ++copy) {
+    Gaussians c = parents;
+    for (std::size_t k = 0; k < c.size(); ++k) {
+      float R[9];
+      rotation(&c.quats[k * 4], R);
+      float s[3];
+      for (int d = 0; d < 3; ++d) s[d] = std::exp(c.log_scales[k * 3 + d]) * static_cast<float>(rng.normal());
+      for (int r = 0; r < 3; ++r) c.means[k * 3 + r] += R[r * 3] * s[0] + R[r * 3 + 1] * s[1] + R[r * 3 + 2] * s[2];
+      for (int d = 0; d < 3; ++d) c.log_scales[k * 3 + d] -= shrink;
+    }
+    append_rows(children, c);
+    child_source.insert(child_source.end(), split_idx.begin(), split_idx.end());
+  }
+
+  // [originals, clones, children]; then drop split parents and low-opacity rows.
+  std::vector<std::uint32_t> source(n);
+  for (std::size_t i = 0; i < n; ++i) source[i] = static_cast<std::uint32_t>(i);
+  append_rows(model, gather_rows(model, clone_idx));
+  source.insert(source.end(), clone_idx.begin(), clone_idx.end());
+  append_rows(model, children);
+  source.insert(source.end(), child_source.begin(), child_source.end());
+  append_zero_moments(adam, clone_idx.size() + children.size());
+
+  std::vector<std::uint8_t> keep(model.size(), 1);
+  for (auto i : split_idx) keep[i] = 0;
+  std::size_t pruned = 0;
+  for (std::size_t i = 0; i < model.size(); ++i) {
+    if (keep[i] && sigmoid(model.opacity_logits[i]) < opt.min_opacity) {
+      keep[i] = 0;
+      ++pruned;
+    }
+  }
+  keep_everywhere(model, adam, keep, source);
+  stats.reset(model.size());
+  report.cloned = clone_idx.size();
+  report.split = split_idx.size();
+  report.pruned = pruned;
+  report.after = model.size();
+  report.source = std::move(source);
+  return report;
+}
+
+DensifyReport prune_by_opacity(Gaussians& model, AdamState& adam, GradientStats& stats, float min_opacity) {
+  check_aligned(model, adam, stats);
+  DensifyReport report;
+  report.before = model.size();
+  std::vector<std::uint8_t> keep(model.size(), 1);
+  std::vector<std::uint32_t> source(model.size());
+  for (std::size_t i = 0; i < model.size(); ++i) {
+    source[i] = static_cast<std::uint32_t>(i);
+    if (sigmoid(model.opacity_logits[i]) < min_opacity) {
+      keep[i] = 0;
+      ++report.pruned;
+    }
+  }
+  keep_everywhere(model, adam, keep, source);
+  stats.reset(model.size());
+  report.after = model.size();
+  report.source = std::move(source);
+  return report;
+}
+
+void reset_opacity(Gaussians& model, AdamState& adam, float ceiling) {
+  const float cap = inverse_sigmoid(ceiling);
+  for (auto& o : model.opacity_logits) o = std::min(o, cap);
+  std::fill(adam.exp_avg.opacity_logits.begin(), adam.exp_avg.opacity_logits.end(), 0.0f);
+  std::fill(adam.exp_avg_sq.opacity_logits.begin(), adam.exp_avg_sq.opacity_logits.end(), 0.0f);
+}
+
+}  // namespace d2gs
