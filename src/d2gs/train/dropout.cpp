@@ -1,0 +1,88 @@
+#include "d2gs/train/dropout.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include "d2gs/core/error.hpp"
+
+namespace d2gs {
+
+double dropgaussian_rate(int iteration, int total_iterations, double max_rate) {
+  if (total_iterations <= 0) fail("DropGaussian: total iterations must be positive");
+  return max_rate * std::clamp(static_cast<double>(iteration) / total_iterations, 0.0, 1.0);
+}
+
+void dropgaussian_mask(std::size_t n, double rate, Rng& rng, std::vector<float>& multiplier) {
+  if (!(rate >= 0.0 && rate < 1.0)) fail("DropGaussian: rate {} outside [0, 1)", rate);
+  multiplier.resize(n);
+  const float keep_scale = static_cast<float>(1.0 / (1.0 - rate));
+  for (std::size_t i = 0; i < n; ++i) multiplier[i] = rng.uniform() < rate ? 0.0f : keep_scale;
+}
+
+double dd_drop_rate(const DdDropOptions& o, int iteration) {
+  const int T = std::max(1, o.rate_iterations);
+  return o.rate_min + (o.rate_max - o.rate_min) * std::min(iteration, T) / static_cast<double>(T);
+}
+
+std::vector<float> minmax(const std::vector<float>& values) {
+  std::vector<float> out(values.size(), 0.0f);
+  if (values.empty()) return out;
+  const auto [lo, hi] = std::minmax_element(values.begin(), values.end());
+  const float range = *hi - *lo;
+  if (!(range > 0.0f)) return out;
+  for (std::size_t i = 0; i < values.size(); ++i) out[i] = (values[i] - *lo) / range;
+  return out;
+}
+
+std::vector<float> gaussian_depths(const Gaussians& model, const Camera& camera, DepthMode mode) {
+  const std::size_t n = model.size();
+  std::vector<float> d(n);
+  const glm::dvec3 c = camera.center_world();
+  // glm is column-major: R[2] is the third column of R_world_to_cam.
+  const glm::dvec3 third_column = camera.R_world_to_cam[2];
+  for (std::size_t i = 0; i < n; ++i) {
+    const glm::dvec3 x(model.means[i * 3], model.means[i * 3 + 1], model.means[i * 3 + 2]);
+    d[i] = static_cast<float>(mode == DepthMode::Euclidean ? glm::length(x - c) : glm::dot(x, third_column));
+  }
+  return d;
+}
+
+std::vector<std::uint8_t> depth_layers(const std::vector<float>& depths) {
+  const std::size_t n = depths.size();
+  std::vector<std::uint8_t> layer(n, 0);
+  if (n == 0) return layer;
+  std::vector<float> sorted = depths;
+  std::sort(sorted.begin(), sorted.end());
+  const float t1 = sorted[std::min(n - 1, static_cast<std::size_t>(0.33 * static_cast<double>(n)))];
+  const float t2 = sorted[std::min(n - 1, static_cast<std::size_t>(0.67 * static_cast<double>(n)))];
+  for (std::size_t i = 0; i < n; ++i) layer[i] = depths[i] < t1 ? 0 : depths[i] < t2 ? 1 : 2;
+  return layer;
+}
+
+std::vector<float> dd_drop_probabilities(const std::vector<float>& depths, const std::vector<float>& density,
+                                         const DdDropOptions& o, int iteration) {
+  const std::size_t n = depths.size();
+  if (density.size() != n) fail("DD-Drop: {} density values for {} Gaussians", density.size(), n);
+  const auto depth_norm = minmax(depths);
+  const auto density_norm = minmax(density);
+  const auto layers = depth_layers(depths);
+  const double lambdas[3] = {o.lambda_near, o.lambda_middle, o.lambda_far};
+  const double rate = dd_drop_rate(o, iteration);
+  std::vector<float> p(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    double s = 0.0;
+    if (o.use_depth_score) s += o.weight_depth * (1.0 - depth_norm[i]);
+    if (o.use_density_score) s += o.weight_density * density_norm[i];
+    const double lambda = o.use_layers ? lambdas[layers[i]] : 1.0;
+    p[i] = static_cast<float>(std::clamp(lambda * s * rate, 0.0, 1.0));
+  }
+  return p;
+}
+
+void bernoulli_mask(const std::vector<float>& probabilities, Rng& rng, std::vector<float>& multiplier) {
+  multiplier.resize(probabilities.size());
+  for (std::size_t i = 0; i < probabilities.size(); ++i)
+    multiplier[i] = rng.uniform() < probabilities[i] ? 0.0f : 1.0f;
+}
+
+}  // namespace d2gs
