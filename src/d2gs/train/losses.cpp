@@ -1,0 +1,91 @@
+#include "d2gs/train/losses.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include "d2gs/core/error.hpp"
+
+namespace d2gs {
+namespace {
+
+inline float sign(float x) { return x > 0.0f ? 1.0f : x < 0.0f ? -1.0f : 0.0f; }
+
+}  // namespace
+
+double l1_loss(const float* a, const float* b, std::size_t count, float* grad, float scale) {
+  if (count == 0) return 0.0;
+  double sum = 0.0;
+  const float g = scale / static_cast<float>(count);
+  for (std::size_t i = 0; i < count; ++i) {
+    const float d = a[i] - b[i];
+    sum += std::abs(d);
+    if (grad) grad[i] += g * sign(d);
+  }
+  return sum / static_cast<double>(count);
+}
+
+double percentile(std::vector<float> values, double q) {
+  if (values.empty()) fail("percentile of an empty set");
+  std::sort(values.begin(), values.end());
+  const double pos = std::clamp(q, 0.0, 100.0) / 100.0 * static_cast<double>(values.size() - 1);
+  const auto lo = static_cast<std::size_t>(std::floor(pos));
+  const auto hi = std::min(lo + 1, values.size() - 1);
+  const double frac = pos - static_cast<double>(lo);
+  return static_cast<double>(values[lo]) + frac * (static_cast<double>(values[hi]) - static_cast<double>(values[lo]));
+}
+
+std::vector<std::uint8_t> dafe_mask(const std::vector<float>& prior, PriorKind kind, DafeMaskRule rule, double tau,
+                                    const std::vector<std::uint8_t>* valid) {
+  const std::size_t n = prior.size();
+  if (valid && valid->size() != n) fail("DAFE: validity mask has {} pixels, prior {}", valid->size(), n);
+  const auto ok = [&](std::size_t i) { return (!valid || (*valid)[i]) && std::isfinite(prior[i]); };
+  std::vector<float> values;
+  values.reserve(n);
+  for (std::size_t i = 0; i < n; ++i)
+    if (ok(i)) values.push_back(prior[i]);
+  std::vector<std::uint8_t> mask(n, 0);
+  if (values.empty()) return mask;
+  if (rule == DafeMaskRule::Percentile) {
+    if (!(tau >= 0.0 && tau <= 100.0)) fail("DAFE: mask percentage {} outside [0, 100]", tau);
+    if (kind == PriorKind::Depth) {
+      const double t = percentile(values, 100.0 - tau);
+      for (std::size_t i = 0; i < n; ++i) mask[i] = ok(i) && prior[i] >= t;
+    } else {
+      const double t = percentile(values, tau);
+      for (std::size_t i = 0; i < n; ++i) mask[i] = ok(i) && prior[i] <= t;
+    }
+  } else {
+    if (kind != PriorKind::Depth)
+      fail("DAFE: the threshold rule needs a depth prior (disparity has an unknown scale and shift)");
+    if (!(tau >= 0.0 && tau <= 1.0)) fail("DAFE: threshold fraction {} outside [0, 1]", tau);
+    const float dmax = *std::max_element(values.begin(), values.end());
+    for (std::size_t i = 0; i < n; ++i) mask[i] = ok(i) && prior[i] > tau * dmax;
+  }
+  return mask;
+}
+
+double dafe_loss(const float* a, const float* b, int width, int height, int channels,
+                 const std::vector<std::uint8_t>& mask, DafeLossForm form, float* grad, float scale) {
+  const std::size_t pixels = static_cast<std::size_t>(width) * height;
+  if (mask.size() != pixels) fail("DAFE: mask has {} pixels, image {}x{}", mask.size(), width, height);
+  std::size_t masked = 0;
+  for (auto m : mask) masked += m != 0;
+  double sum = 0.0;
+  for (std::size_t p = 0; p < pixels; ++p) {
+    if (!mask[p]) continue;
+    for (int c = 0; c < channels; ++c) sum += std::abs(a[p * channels + c] - b[p * channels + c]);
+  }
+  const double denom = form == DafeLossForm::Paper ? static_cast<double>(masked)
+                                                   : static_cast<double>(pixels) * channels;
+  if (denom == 0.0) return 0.0;
+  if (grad) {
+    const float g = static_cast<float>(scale / denom);
+    for (std::size_t p = 0; p < pixels; ++p) {
+      if (!mask[p]) continue;
+      for (int c = 0; c < channels; ++c) grad[p * channels + c] += g * sign(a[p * channels + c] - b[p * channels + c]);
+    }
+  }
+  return sum / denom;
+}
+
+}  // namespace d2gs

@@ -1,0 +1,32 @@
+#pragma once
+// Photometric losses with hand-written gradients (w.r.t. the rendered image), and DAFE (method.md §5).
+// Images are interleaved H×W×C floats; masks are H×W bytes (1 = far region).
+#include <cstdint>
+#include <vector>
+
+namespace d2gs {
+
+// mean |a − b| over all C·H·W values; grad (if non-null) += scale · d/da. |x|' at 0 is 0 (as torch).
+double l1_loss(const float* a, const float* b, std::size_t count, float* grad = nullptr, float scale = 1.0f);
+
+enum class PriorKind { Depth, Disparity };  // disparity: large = near (Depth Anything V2 output)
+enum class DafeMaskRule { Percentile, Threshold };
+enum class DafeLossForm { Paper, Release };
+
+// Far-region mask from a prior map. Percentile: the farthest `tau_percent` % of the valid pixels, i.e.
+// depth ≥ its (100 − τ)-th percentile, or disparity ≤ its τ-th percentile (NumPy's linear
+// interpolation), which is unchanged by any positive affine change of disparity. Threshold (the paper's
+// equation, depth priors only): depth > τ·max depth, τ given as a fraction in [0, 1].
+// `valid` (optional, same size) excludes pixels without a prior value; they are never in the mask.
+std::vector<std::uint8_t> dafe_mask(const std::vector<float>& prior, PriorKind kind, DafeMaskRule rule, double tau,
+                                    const std::vector<std::uint8_t>* valid = nullptr);
+
+// DAFE loss on the masked pixels. Paper: Σ_p M_p·Σ_c |a − b| / Σ_p M_p (0 for an empty mask). Release:
+// mean over all C·H·W values of |M·(a − b)|. grad (if non-null) += scale · d/da.
+double dafe_loss(const float* a, const float* b, int width, int height, int channels,
+                 const std::vector<std::uint8_t>& mask, DafeLossForm form, float* grad = nullptr, float scale = 1.0f);
+
+// NumPy-compatible percentile (linear interpolation between closest ranks) of the given values.
+double percentile(std::vector<float> values, double q);
+
+}  // namespace d2gs
