@@ -37,10 +37,34 @@ struct Scene {
   std::vector<std::string> warnings;   // non-fatal problems met while loading (also logged)
 };
 
-// Detects the format of `root` and loads it. Throws d2gs::Error naming the file and the problem.
+// Detects the format of `root` and loads it: sparse/0/images.{bin,txt} -> COLMAP, else
+// poses_bounds.npy -> LLFF, else transforms_train.json -> Blender (docs/formats.md, "Scenes"). Throws d2gs::Error naming the file and the problem.
 Scene load_scene(const std::filesystem::path& root, const SceneLoadOptions& options = {});
 // Decodes camera `index`'s image at the scene's resolution: RGB float [0,1], alpha composited on the
 // scene's background, area-resampled when needed; throws if its size differs from the camera's.
 Image load_image(const Scene& scene, int index);
+
+// ---- resolution handling, shared by the format loaders ----
+
+// Throws unless resolution is 1, 2, 4 or 8.
+void check_resolution(int resolution);
+
+// Where the images of an LLFF/COLMAP scene are read from at resolution R.
+struct ImageFolderChoice {
+  std::string folder;     // relative to the scene root: "images" (F = 1) or "images_F"
+  int folder_factor = 1;  // F: the folder holds 1/F of full resolution
+  int resample = 1;       // R / F: further area downsampling applied on load
+};
+// images_R/ (images/ for R = 1) when it exists, otherwise images_F for the largest F dividing R that
+// exists (a folder is only ever downsampled). Throws naming the root and the folders looked for.
+ImageFolderChoice choose_image_folder(const std::filesystem::path& root, int resolution);
+
+// Length of an image side after area resampling by `factor`: round_half_even(length / factor), at
+// least 1 (the rounding of the 3DGS loader, whose Python round() is half-to-even).
+int resampled_length(int length, int factor);
+
+// Fills camera.width/height/resample_factor/has_alpha from the header of camera.image_path (the image
+// is not decoded): the file's size divided by `resample`. Throws naming the file when it is missing.
+void set_camera_image(Camera& camera, int resample);
 
 }  // namespace d2gs
