@@ -1,6 +1,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <algorithm>
 #include <numeric>
 
 #include "d2gs/train/dropout.hpp"
@@ -36,7 +37,7 @@ TEST(DdDrop, ScoresLayersAndProbabilitiesOnAHandComputedCase) {
   EXPECT_DOUBLE_EQ(dd_drop_rate(o, 0), 0.05);
   EXPECT_DOUBLE_EQ(dd_drop_rate(o, 5000), 0.175);
   EXPECT_DOUBLE_EQ(dd_drop_rate(o, 20000), 0.3);
-  const auto p = dd_drop_probabilities(depth, density, o, 10000);
+  const auto p = dd_drop_probabilities(depth, minmax(density), o, 10000);
   // Gaussian 0: depth score 1, density score 1 → S = 1, λ = 1, r = 0.3.
   EXPECT_NEAR(p[0], 0.3, 1e-7);
   // Gaussian 4 (depth 5): depth score 0.5, density score 0.5 → S = 0.5, λ = 0.7.
@@ -46,7 +47,7 @@ TEST(DdDrop, ScoresLayersAndProbabilitiesOnAHandComputedCase) {
   // Ablations: without layers λ = 1; without density only the depth term remains.
   o.use_layers = false;
   o.use_density_score = false;
-  const auto q = dd_drop_probabilities(depth, density, o, 10000);
+  const auto q = dd_drop_probabilities(depth, minmax(density), o, 10000);
   EXPECT_NEAR(q[4], 0.5 * 0.5 * 0.3, 1e-7);
 }
 
@@ -58,7 +59,7 @@ TEST(DdDrop, EmpiricalDropCountMatchesSumOfProbabilities) {
     depth[i] = static_cast<float>(1.0 + 50.0 * init.uniform());
     density[i] = static_cast<float>(-init.uniform());
   }
-  const auto p = dd_drop_probabilities(depth, density, DdDropOptions{}, 7000);
+  const auto p = dd_drop_probabilities(depth, minmax(density), DdDropOptions{}, 7000);
   const double expected = std::accumulate(p.begin(), p.end(), 0.0);
   double variance = 0;
   for (float v : p) variance += v * (1.0 - v);
@@ -86,6 +87,18 @@ TEST(DdDrop, DepthFormulas) {
   // A rotation about y by 90°: third column of R_w2c is (sin, 0, cos) = (1, 0, 0) in glm's column form.
   cam.R_world_to_cam = glm::dmat3(glm::dvec3(0, 0, -1), glm::dvec3(0, 1, 0), glm::dvec3(1, 0, 0));
   EXPECT_NEAR(gaussian_depths(g, cam, DepthMode::ReleaseDot)[0], 1.0, 1e-6);
+}
+
+TEST(DdDrop, DensityScoreIsHighestInTheDenseCluster) {
+  Gaussians g;
+  g.resize(10, 0);
+  // Seven points packed within 0.01 and three spread 1 apart.
+  for (int i = 0; i < 7; ++i) g.means[static_cast<std::size_t>(i) * 3] = 0.01f * static_cast<float>(i) / 7.0f;
+  for (int i = 7; i < 10; ++i) g.means[static_cast<std::size_t>(i) * 3] = static_cast<float>(i - 5);
+  const auto s = density_scores(g);
+  for (int i = 0; i < 7; ++i) EXPECT_GT(s[i], 0.9f);
+  EXPECT_EQ(*std::min_element(s.begin(), s.end()), 0.0f);
+  EXPECT_LT(s[9], 0.1f);
 }
 
 TEST(DdDrop, MinmaxOfConstantIsZero) {

@@ -65,6 +65,19 @@ public:
   }
   bool bernoulli(double p) { return uniform() < p; }
 
+  // The complete state (for checkpoints): four words, the spare normal's bits, and whether it is held.
+  struct State {
+    std::uint64_t words[4];
+    double spare;
+    bool has_spare;
+  };
+  State state() const { return {{state_[0], state_[1], state_[2], state_[3]}, spare_, has_spare_}; }
+  void set_state(const State& s) {
+    for (int i = 0; i < 4; ++i) state_[i] = s.words[i];
+    spare_ = s.spare;
+    has_spare_ = s.has_spare;
+  }
+
 private:
   static std::uint64_t rotl(std::uint64_t x, int k) { return (x << k) | (x >> (64 - k)); }
   static std::uint64_t splitmix(std::uint64_t z) {

@@ -37,7 +37,8 @@ AdamState Adam::make_state(const Gaussians& model) {
   return s;
 }
 
-void Adam::step(Gaussians& model, const Gaussians& grads, AdamState& state, const LearningRates& lr, float means_lr) {
+void Adam::step(Gaussians& model, const Gaussians& grads, AdamState& state, const LearningRates& lr, float means_lr,
+                bool skip_opacity) {
   grads.validate();
   if (grads.size() != model.size() || state.exp_avg.size() != model.size() || grads.sh_degree != model.sh_degree)
     fail("Adam: model, gradients and moments are not aligned ({}, {}, {} rows)", model.size(), grads.size(),
@@ -50,7 +51,8 @@ void Adam::step(Gaussians& model, const Gaussians& grads, AdamState& state, cons
   update(model.means, grads.means, m.means, v.means, means_lr, bias1, bias2);
   update(model.sh_dc, grads.sh_dc, m.sh_dc, v.sh_dc, lr.sh_dc, bias1, bias2);
   update(model.sh_rest, grads.sh_rest, m.sh_rest, v.sh_rest, lr.sh_rest, bias1, bias2);
-  update(model.opacity_logits, grads.opacity_logits, m.opacity_logits, v.opacity_logits, lr.opacity, bias1, bias2);
+  if (!skip_opacity)
+    update(model.opacity_logits, grads.opacity_logits, m.opacity_logits, v.opacity_logits, lr.opacity, bias1, bias2);
   update(model.log_scales, grads.log_scales, m.log_scales, v.log_scales, lr.scales, bias1, bias2);
   update(model.quats, grads.quats, m.quats, v.quats, lr.quats, bias1, bias2);
 }

@@ -38,8 +38,10 @@ public:
   // Zero moments shaped like `model`.
   static AdamState make_state(const Gaussians& model);
   // One step with the given gradients; `means_lr` is the (scheduled) position learning rate.
+  // `skip_opacity`: leave opacity and its moments as they are (the original takes no opacity step in
+  // the iteration whose opacity reset replaced the tensor).
   static void step(Gaussians& model, const Gaussians& grads, AdamState& state, const LearningRates& lr,
-                   float means_lr);
+                   float means_lr, bool skip_opacity = false);
 };
 
 }  // namespace d2gs

@@ -29,6 +29,13 @@ public:
   void add(const std::vector<float>& grad_mean2d_ndc, const std::vector<int>& radii);
   std::vector<float> mean() const;  // 0 where never visible
   std::size_t size() const { return sum_.size(); }
+  // Raw sums and counts (checkpoints).
+  const std::vector<float>& sums() const { return sum_; }
+  const std::vector<float>& counts() const { return count_; }
+  void restore(std::vector<float> sums, std::vector<float> counts) {
+    sum_ = std::move(sums);
+    count_ = std::move(counts);
+  }
 
 private:
   std::vector<float> sum_;

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "d2gs/core/error.hpp"
+#include "d2gs/geometry/knn.hpp"
 
 namespace d2gs {
 
@@ -59,12 +60,17 @@ std::vector<std::uint8_t> depth_layers(const std::vector<float>& depths) {
   return layer;
 }
 
-std::vector<float> dd_drop_probabilities(const std::vector<float>& depths, const std::vector<float>& density,
+std::vector<float> density_scores(const Gaussians& model) {
+  auto rho = knn_mean_distance(model.means.data(), model.size(), 6, KnnStatistic::MeanDistance);
+  for (auto& v : rho) v = -v;
+  return minmax(rho);
+}
+
+std::vector<float> dd_drop_probabilities(const std::vector<float>& depths, const std::vector<float>& density_norm,
                                          const DdDropOptions& o, int iteration) {
   const std::size_t n = depths.size();
-  if (density.size() != n) fail("DD-Drop: {} density values for {} Gaussians", density.size(), n);
+  if (density_norm.size() != n) fail("DD-Drop: {} density scores for {} Gaussians", density_norm.size(), n);
   const auto depth_norm = minmax(depths);
-  const auto density_norm = minmax(density);
   const auto layers = depth_layers(depths);
   const double lambdas[3] = {o.lambda_near, o.lambda_middle, o.lambda_far};
   const double rate = dd_drop_rate(o, iteration);

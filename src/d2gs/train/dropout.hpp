@@ -47,8 +47,11 @@ std::vector<float> gaussian_depths(const Gaussians& model, const Camera& camera,
 // and N their count, the thresholds are t1 = s[⌊0.33·N⌋] and t2 = s[⌊0.67·N⌋]; d < t1 is near,
 // t1 ≤ d < t2 middle, the rest far.
 std::vector<std::uint8_t> depth_layers(const std::vector<float>& depths);
-// Drop probabilities p_i (clamped to [0, 1]). `density` holds ρ_i (already aligned with the model).
-std::vector<float> dd_drop_probabilities(const std::vector<float>& depths, const std::vector<float>& density,
+// Density scores minmax(ρ_i), ρ_i = −mean distance to the 6 nearest other Gaussians (kNN, nanoflann).
+std::vector<float> density_scores(const Gaussians& model);
+// Drop probabilities p_i (clamped to [0, 1]) from depths and density scores in [0, 1] (dense → 1),
+// both aligned with the model.
+std::vector<float> dd_drop_probabilities(const std::vector<float>& depths, const std::vector<float>& density_score,
                                          const DdDropOptions& options, int iteration);
 // Bernoulli draws: multiplier 0 where dropped, 1 elsewhere.
 void bernoulli_mask(const std::vector<float>& probabilities, Rng& rng, std::vector<float>& multiplier);

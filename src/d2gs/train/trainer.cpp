@@ -1,0 +1,562 @@
+#include "d2gs/train/trainer.hpp"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <set>
+
+#include <nlohmann/json.hpp>
+#include <spdlog/spdlog.h>
+
+#include "d2gs/core/atomic_file.hpp"
+#include "d2gs/core/error.hpp"
+#include "d2gs/core/npy.hpp"
+#include "d2gs/core/random.hpp"
+#include "d2gs/model/ply.hpp"
+#include "d2gs/render/activations.hpp"
+#include "d2gs/render/rasterizer.hpp"
+#include "d2gs/train/densify.hpp"
+#include "d2gs/train/dropout.hpp"
+#include "d2gs/train/initialize.hpp"
+#include "d2gs/train/losses.hpp"
+#include "d2gs/train/ssim.hpp"
+
+namespace d2gs {
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+float compute_scene_extent(const Scene& scene, const std::vector<int>& views) {
+  glm::dvec3 mean(0.0);
+  for (int v : views) mean += scene.cameras[static_cast<std::size_t>(v)].center_world();
+  mean /= static_cast<double>(views.size());
+  double radius = 0.0;
+  for (int v : views) radius = std::max(radius, glm::length(scene.cameras[static_cast<std::size_t>(v)].center_world() - mean));
+  if (!(radius > 0.0)) radius = 1.0;  // a single view: the original falls back likewise to a unit radius
+  return static_cast<float>(1.1 * radius);
+}
+
+std::string format_duration(double seconds) {
+  if (!std::isfinite(seconds) || seconds < 0) return "--:--";
+  const long s = std::lround(seconds);
+  if (s >= 3600) return fmt::format("{}:{:02}:{:02}", s / 3600, (s / 60) % 60, s % 60);
+  return fmt::format("{:02}:{:02}", s / 60, s % 60);
+}
+
+// Binary checkpoint helpers: little-endian raw arrays after a JSON header.
+void put_vec(std::string& out, const std::vector<float>& v) {
+  const std::uint64_t n = v.size();
+  out.append(reinterpret_cast<const char*>(&n), sizeof n);
+  out.append(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(float));
+}
+
+struct Reader {
+  std::string_view bytes;
+  std::size_t pos = 0;
+  fs::path source;
+  std::vector<float> vec() {
+    std::uint64_t n = 0;
+    if (bytes.size() - pos < sizeof n) fail_file(source, "truncated checkpoint");
+    std::memcpy(&n, bytes.data() + pos, sizeof n);
+    pos += sizeof n;
+    if (n > (bytes.size() - pos) / sizeof(float)) fail_file(source, "truncated checkpoint");
+    std::vector<float> v(n);
+    std::memcpy(v.data(), bytes.data() + pos, n * sizeof(float));
+    pos += n * sizeof(float);
+    return v;
+  }
+};
+
+void put_model(std::string& out, const Gaussians& g) {
+  for (const auto* a : {&g.means, &g.log_scales, &g.quats, &g.opacity_logits, &g.sh_dc, &g.sh_rest}) put_vec(out, *a);
+}
+Gaussians get_model(Reader& r, int degree) {
+  Gaussians g;
+  g.sh_degree = degree;
+  for (auto* a : {&g.means, &g.log_scales, &g.quats, &g.opacity_logits, &g.sh_dc, &g.sh_rest}) *a = r.vec();
+  g.validate();
+  return g;
+}
+
+nlohmann::json rng_json(const Rng& rng) {
+  const auto st = rng.state();
+  std::uint64_t spare_bits = 0;
+  std::memcpy(&spare_bits, &st.spare, sizeof spare_bits);
+  return {{"words", {st.words[0], st.words[1], st.words[2], st.words[3]}}, {"spare", spare_bits}, {"has_spare", st.has_spare}};
+}
+void rng_from_json(Rng& rng, const nlohmann::json& j) {
+  Rng::State st{};
+  for (int i = 0; i < 4; ++i) st.words[i] = j.at("words").at(static_cast<std::size_t>(i)).get<std::uint64_t>();
+  const auto spare_bits = j.at("spare").get<std::uint64_t>();
+  std::memcpy(&st.spare, &spare_bits, sizeof st.spare);
+  st.has_spare = j.at("has_spare").get<bool>();
+  rng.set_state(st);
+}
+
+const char* kCheckpointMagic = "D2GSCKPT1\n";
+
+}  // namespace
+
+PointCloud random_point_cloud(const Scene& scene, const std::vector<int>& views, int count, float extent,
+                              std::uint64_t seed) {
+  // Each point: a random training view, a random pixel, a depth with uniform inverse depth between
+  // 0.5·E and 50·E (E = scene extent), so near and far regions of the frustum both get points.
+  Rng rng = Rng::stream(seed, "random-init");
+  PointCloud cloud;
+  cloud.positions.reserve(static_cast<std::size_t>(count));
+  const double inv_near = 1.0 / (0.5 * extent), inv_far = 1.0 / (50.0 * extent);
+  for (int i = 0; i < count; ++i) {
+    const Camera& cam = scene.cameras[static_cast<std::size_t>(views[rng.below(views.size())])];
+    const double px = rng.uniform() * cam.width, py = rng.uniform() * cam.height;
+    const double depth = 1.0 / (inv_far + rng.uniform() * (inv_near - inv_far));
+    const glm::dvec3 p_cam((px - cam.cx) / cam.fx * depth, (py - cam.cy) / cam.fy * depth, depth);
+    const glm::dvec3 p = cam.R_cam_to_world() * (p_cam - cam.t_world_to_cam);
+    cloud.positions.emplace_back(glm::vec3(p));
+    cloud.colors.emplace_back(static_cast<std::uint8_t>(rng.below(256)), static_cast<std::uint8_t>(rng.below(256)),
+                              static_cast<std::uint8_t>(rng.below(256)));
+  }
+  return cloud;
+}
+
+struct Trainer::State {
+  TrainConfig cfg;
+  Scene scene;
+  Split split;
+  std::vector<Image> train_images;            // by position in split.train
+  std::vector<render::RenderCamera> train_cameras;
+  float extent = 1.0f;
+  bool oracle_init = false;
+
+  Gaussians model;
+  AdamState adam;
+  GradientStats stats;
+  std::unique_ptr<render::Rasterizer> rasterizer;
+  Ssim<float> ssim;
+  int iteration = 0;
+  int active_sh = 0;
+  Rng rng_cameras, rng_dropout, rng_densify;
+  std::vector<int> camera_stack;              // positions in split.train still to visit this epoch
+  std::vector<float> density_cache;           // D²GS: density scores
+  std::vector<std::vector<std::uint8_t>> dafe_masks;  // D²GS: far-region mask per training view
+  double elapsed_before = 0.0;                // seconds spent before a resume
+
+  // per-iteration buffers (reused)
+  std::vector<float> multiplier, pred, grad_rgb, dd_probabilities;
+  Clock::time_point started = Clock::now();
+  std::ofstream log;
+
+  double elapsed() const { return elapsed_before + std::chrono::duration<double>(Clock::now() - started).count(); }
+  fs::path out() const { return cfg.model_dir; }
+};
+
+namespace {
+
+void check_model_dir(const TrainConfig& cfg, bool resuming) {
+  const fs::path dir = cfg.model_dir;
+  std::error_code ec;
+  if (!fs::exists(dir, ec)) return;
+  if (!fs::is_directory(dir, ec)) fail_file(dir, "exists and is not a folder");
+  if (resuming) return;
+  if (fs::exists(dir / "config.json")) {
+    if (fs::exists(dir / "point_cloud") || fs::exists(dir / "train_log.jsonl"))
+      fail_file(dir, "already holds a training run (use a new folder, or --resume CHECKPOINT)");
+    return;
+  }
+  if (fs::directory_iterator(dir, ec) != fs::directory_iterator{})
+    fail_file(dir, "is not empty and holds no d2gs run; refusing to write into it");
+}
+
+void load_dafe_priors(Trainer::State& s) {
+  const auto& cfg = s.cfg;
+  s.dafe_masks.assign(s.split.train.size(), {});
+  if (cfg.method != Method::D2gs || !cfg.dafe || cfg.dafe_prior_dir.empty()) return;
+  const fs::path dir = cfg.dafe_prior_dir;
+  for (std::size_t k = 0; k < s.split.train.size(); ++k) {
+    const Camera& cam = s.scene.cameras[static_cast<std::size_t>(s.split.train[k])];
+    const std::string stem = fs::path(cam.image_name).stem().string();
+    const fs::path npy = dir / (stem + ".npy");
+    if (!fs::exists(npy)) fail_file(npy, "DAFE prior missing for training view {}", cam.image_name);
+    const NpyArray a = read_npy(npy);
+    if (a.shape.size() != 2) fail_file(npy, "expected an H×W map, got {} dimensions", a.shape.size());
+    const int h = static_cast<int>(a.shape[0]), w = static_cast<int>(a.shape[1]);
+    Image prior(w, h, 1);
+    for (std::size_t i = 0; i < a.values.size(); ++i) prior.pixels[i] = static_cast<float>(a.values[i]);
+    if (w != cam.width || h != cam.height) prior = resize_area(prior, cam.width, cam.height);
+    s.dafe_masks[k] = dafe_mask(prior.pixels, cfg.dafe_prior_kind, cfg.dafe_mask_rule, cfg.dafe_tau);
+  }
+}
+
+// D²GS without a prior folder: the model's own normalised depth, rendered once for every training view
+// at the first iteration of DAFE (iteration `self_prior_at`), is the depth prior.
+constexpr int kSelfPriorIteration = 1000;
+
+void make_self_priors(Trainer::State& s) {
+  render::RenderOptions ro;
+  ro.background = s.scene.background;
+  ro.sh_degree = s.active_sh;
+  for (std::size_t k = 0; k < s.split.train.size(); ++k) {
+    const auto& out = s.rasterizer->forward(s.model, nullptr, s.train_cameras[k], ro);
+    std::vector<float> depth(out.depth.size());
+    std::vector<std::uint8_t> valid(out.depth.size());
+    for (std::size_t i = 0; i < depth.size(); ++i) {
+      valid[i] = out.alpha[i] > 0.5f;
+      depth[i] = valid[i] ? out.depth[i] / out.alpha[i] : 0.0f;
+    }
+    s.dafe_masks[k] = dafe_mask(depth, PriorKind::Depth, s.cfg.dafe_mask_rule == DafeMaskRule::Threshold
+                                                             ? DafeMaskRule::Threshold : DafeMaskRule::Percentile,
+                                s.cfg.dafe_tau, &valid);
+  }
+}
+
+void write_cameras_json(const Trainer::State& s) {
+  nlohmann::json cams = nlohmann::json::array();
+  std::vector<int> all = s.split.train;
+  all.insert(all.end(), s.split.test.begin(), s.split.test.end());
+  int id = 0;
+  for (int v : all) {
+    const Camera& c = s.scene.cameras[static_cast<std::size_t>(v)];
+    const glm::dmat3 R = c.R_cam_to_world();
+    const glm::dvec3 pos = c.center_world();
+    nlohmann::json rot = nlohmann::json::array();
+    for (int r = 0; r < 3; ++r) rot.push_back({R[0][r], R[1][r], R[2][r]});
+    cams.push_back({{"id", id++}, {"img_name", fs::path(c.image_name).stem().string()}, {"width", c.width},
+                    {"height", c.height}, {"position", {pos.x, pos.y, pos.z}}, {"rotation", rot}, {"fy", c.fy},
+                    {"fx", c.fx}, {"global_index", v}});
+  }
+  write_file_atomic(s.out() / "cameras.json", cams.dump(1));
+}
+
+}  // namespace
+
+Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make_unique<State>()) {
+  auto& s = *s_;
+  config.validate();
+  s.cfg = std::move(config);
+  check_model_dir(s.cfg, !resume_from.empty());
+  SceneLoadOptions lo;
+  lo.resolution = s.cfg.resolution;
+  lo.background = s.cfg.white_background ? glm::vec3(1.0f) : glm::vec3(0.0f);
+  s.scene = load_scene(s.cfg.source, lo);
+  SplitOptions so;
+  so.n_views = s.cfg.n_views;
+  so.train_views = s.cfg.train_views;
+  so.test_views = s.cfg.test_views;
+  s.split = make_split(s.scene, so);
+  if (s.split.train.empty()) fail("{}: no training views", s.cfg.source);
+  for (int v : s.split.train) {
+    s.train_images.push_back(load_image(s.scene, v));
+    s.train_cameras.push_back(render::make_render_camera(s.scene.cameras[static_cast<std::size_t>(v)]));
+  }
+  s.extent = compute_scene_extent(s.scene, s.split.train);
+  s.rasterizer = render::make_cpu_rasterizer();
+  s.rng_cameras = Rng::stream(s.cfg.seed, "cameras");
+  s.rng_dropout = Rng::stream(s.cfg.seed, "dropout");
+  s.rng_densify = Rng::stream(s.cfg.seed, "densify");
+
+  PointCloud init;
+  if (s.cfg.init == "sfm-all-views") {
+    if (s.scene.sfm_points.empty())
+      fail("{}: the scene has no SfM points for --init sfm-all-views; use --init random or --init PLY", s.cfg.source);
+    init = s.scene.sfm_points;
+    s.oracle_init = true;
+    spdlog::warn("initialising from the dataset's all-view SfM points: an ORACLE (it saw the test views)");
+  } else if (s.cfg.init == "random") {
+    init = random_point_cloud(s.scene, s.split.train, s.cfg.random_points, s.extent, s.cfg.seed);
+  } else {
+    init = read_point_cloud_ply(s.cfg.init);
+  }
+  s.model = gaussians_from_point_cloud(init, s.cfg.sh_degree);
+  s.adam = Adam::make_state(s.model);
+  s.stats.reset(s.model.size());
+  load_dafe_priors(s);
+
+  fs::create_directories(s.out());
+  if (!resume_from.empty()) {
+    const std::string bytes = read_file(resume_from);
+    const std::string_view magic(kCheckpointMagic);
+    if (bytes.size() < magic.size() + 8 || std::string_view(bytes).substr(0, magic.size()) != magic)
+      fail_file(resume_from, "not a d2gs checkpoint");
+    std::uint64_t header_len = 0;
+    std::memcpy(&header_len, bytes.data() + magic.size(), sizeof header_len);
+    if (header_len > bytes.size() - magic.size() - 8) fail_file(resume_from, "truncated checkpoint");
+    nlohmann::json h;
+    try {
+      h = nlohmann::json::parse(bytes.substr(magic.size() + 8, header_len));
+      s.iteration = h.at("iteration");
+      s.active_sh = h.at("active_sh");
+      s.adam.step = h.at("adam_step");
+      s.elapsed_before = h.at("elapsed_s");
+      s.camera_stack = h.at("camera_stack").get<std::vector<int>>();
+      rng_from_json(s.rng_cameras, h.at("rng_cameras"));
+      rng_from_json(s.rng_dropout, h.at("rng_dropout"));
+      rng_from_json(s.rng_densify, h.at("rng_densify"));
+      if (h.at("seed").get<std::uint64_t>() != s.cfg.seed || h.at("method").get<std::string>() != to_string(s.cfg.method))
+        fail_file(resume_from, "was written by a run with another seed or method");
+    } catch (const nlohmann::json::exception& e) {
+      fail_file(resume_from, "corrupt checkpoint header ({})", e.what());
+    }
+    Reader r{bytes, magic.size() + 8 + header_len, resume_from};
+    const int degree = h.at("sh_degree");
+    s.model = get_model(r, degree);
+    s.adam.exp_avg = get_model(r, degree);
+    s.adam.exp_avg_sq = get_model(r, degree);
+    auto sums = r.vec();
+    auto counts = r.vec();
+    s.stats.restore(std::move(sums), std::move(counts));
+    s.density_cache = r.vec();
+    const std::size_t masks = h.at("dafe_masks");
+    s.dafe_masks.assign(s.split.train.size(), {});
+    for (std::size_t k = 0; k < masks && k < s.dafe_masks.size(); ++k) {
+      const auto m = r.vec();
+      s.dafe_masks[k].assign(m.begin(), m.end());
+    }
+    if (s.adam.exp_avg.size() != s.model.size() || s.stats.size() != s.model.size())
+      fail_file(resume_from, "checkpoint arrays are not aligned");
+    spdlog::info("resumed from {} at iteration {}", resume_from.string(), s.iteration);
+  } else {
+    write_point_cloud_ply(s.out() / "input.ply", init);
+  }
+  nlohmann::json cfg_json;
+  to_json(cfg_json, s.cfg);
+  cfg_json["init_is_oracle"] = s.oracle_init;
+  cfg_json["scene_extent"] = s.extent;
+  cfg_json["split"] = {{"train", s.split.train}, {"test", s.split.test}};
+  write_file_atomic(s.out() / "config.json", cfg_json.dump(2));
+  write_cameras_json(s);
+  s.log.open(s.out() / "train_log.jsonl", s.iteration > 0 ? std::ios::app : std::ios::trunc);
+  if (!s.log) fail_file(s.out() / "train_log.jsonl", "cannot open for writing");
+  s.started = Clock::now();
+}
+
+Trainer::~Trainer() = default;
+
+int Trainer::iteration() const { return s_->iteration; }
+const Gaussians& Trainer::model() const { return s_->model; }
+const Scene& Trainer::scene() const { return s_->scene; }
+const Split& Trainer::split() const { return s_->split; }
+const TrainConfig& Trainer::config() const { return s_->cfg; }
+float Trainer::scene_extent() const { return s_->extent; }
+bool Trainer::init_is_oracle() const { return s_->oracle_init; }
+
+IterationRecord Trainer::step() {
+  auto& s = *s_;
+  const auto& cfg = s.cfg;
+  const int t = ++s.iteration;
+  IterationRecord rec;
+  rec.iteration = t;
+
+  const float means_lr = static_cast<float>(
+      position_lr(cfg.lr.means * s.extent, cfg.position_lr_final * s.extent, t, cfg.iterations));
+  if (t % cfg.sh_increase_every == 0) s.active_sh = std::min(s.active_sh + 1, cfg.sh_degree);
+
+  if (s.camera_stack.empty()) {
+    s.camera_stack.resize(s.split.train.size());
+    for (std::size_t k = 0; k < s.camera_stack.size(); ++k) s.camera_stack[k] = static_cast<int>(k);
+  }
+  const std::size_t pick = s.rng_cameras.below(s.camera_stack.size());
+  const int view = s.camera_stack[pick];
+  s.camera_stack.erase(s.camera_stack.begin() + static_cast<std::ptrdiff_t>(pick));
+  const Image& gt = s.train_images[static_cast<std::size_t>(view)];
+  const std::size_t n = s.model.size();
+
+  // Dropout mask.
+  const float* multiplier = nullptr;
+  if (cfg.method == Method::DropGaussian) {
+    dropgaussian_mask(n, dropgaussian_rate(t, cfg.iterations, cfg.dropgaussian_max_rate), s.rng_dropout, s.multiplier);
+    multiplier = s.multiplier.data();
+  } else if (cfg.method == Method::D2gs) {
+    if (t == 1 || t % cfg.density_refresh_every == 0 || s.density_cache.empty()) s.density_cache = density_scores(s.model);
+    std::vector<float> density = s.density_cache;
+    if (density.size() != n) {  // only with the release's cache behaviour
+      if (density.size() < n) density.assign(n, 0.5f);
+      else density.resize(n);
+    }
+    const Camera& cam = s.scene.cameras[static_cast<std::size_t>(s.split.train[static_cast<std::size_t>(view)])];
+    s.dd_probabilities = dd_drop_probabilities(gaussian_depths(s.model, cam, cfg.dd_drop.depth_mode), density, cfg.dd_drop, t);
+    bernoulli_mask(s.dd_probabilities, s.rng_dropout, s.multiplier);
+    multiplier = s.multiplier.data();
+  }
+  if (multiplier) {
+    std::size_t dropped = 0;
+    for (std::size_t i = 0; i < n; ++i) dropped += s.multiplier[i] == 0.0f;
+    rec.drop_fraction = n ? static_cast<double>(dropped) / static_cast<double>(n) : 0.0;
+  }
+
+  // D²GS without a prior folder: the self prior is rendered before this iteration's forward pass.
+  if (cfg.method == Method::D2gs && cfg.dafe && cfg.dafe_prior_dir.empty() && t == kSelfPriorIteration)
+    make_self_priors(s);
+
+  // Render and loss on the clamped image.
+  render::RenderOptions ro;
+  ro.background = s.scene.background;
+  ro.sh_degree = s.active_sh;
+  const auto& out = s.rasterizer->forward(s.model, multiplier, s.train_cameras[static_cast<std::size_t>(view)], ro);
+  const std::size_t values = out.rgb.size();
+  s.pred.resize(values);
+  s.grad_rgb.assign(values, 0.0f);
+  for (std::size_t i = 0; i < values; ++i) s.pred[i] = std::clamp(out.rgb[i], 0.0f, 1.0f);
+  rec.l1 = l1_loss(s.pred.data(), gt.pixels.data(), values, s.grad_rgb.data(), 1.0f);
+  rec.ssim = s.ssim.evaluate(s.pred.data(), gt.pixels.data(), out.width, out.height, 3, s.grad_rgb.data(),
+                             -cfg.lambda_dssim);
+  rec.loss = rec.l1 + cfg.lambda_dssim * (1.0 - rec.ssim);
+  if (cfg.method == Method::D2gs && cfg.dafe) {
+    const auto& mask = s.dafe_masks[static_cast<std::size_t>(view)];
+    if (!mask.empty()) {
+      rec.dafe = dafe_loss(s.pred.data(), gt.pixels.data(), out.width, out.height, 3, mask, cfg.dafe_loss_form,
+                           s.grad_rgb.data(), cfg.dafe_lambda);
+      rec.loss += cfg.dafe_lambda * rec.dafe;
+    }
+  }
+  for (std::size_t i = 0; i < values; ++i)
+    if (out.rgb[i] < 0.0f || out.rgb[i] > 1.0f) s.grad_rgb[i] = 0.0f;  // clamp: no gradient outside [0, 1]
+  if (!std::isfinite(rec.loss)) fail("iteration {}: the loss is not finite ({}); stopping", t, rec.loss);
+
+  const auto& grads = s.rasterizer->backward(s.grad_rgb.data(), nullptr, nullptr);
+  {
+    const auto check = [&](const std::vector<float>& a, const char* name) {
+      for (float v : a)
+        if (!std::isfinite(v)) fail("iteration {}: non-finite gradient in {}; stopping", t, name);
+    };
+    check(grads.model.means, "means");
+    check(grads.model.log_scales, "log_scales");
+    check(grads.model.quats, "quats");
+    check(grads.model.opacity_logits, "opacity_logits");
+    check(grads.model.sh_dc, "sh_dc");
+    check(grads.model.sh_rest, "sh_rest");
+  }
+
+  // Densification (before the optimiser step, as the original).
+  bool skip_step = false, skip_opacity = false;
+  if (t < cfg.densify_until) {
+    s.stats.add(grads.grad_mean2d_ndc, out.radii);
+    if (t > cfg.densify_from && t % cfg.densify_every == 0) {
+      const auto report = densify_and_prune(s.model, s.adam, s.stats, s.extent, cfg.densify, s.rng_densify);
+      if (cfg.method == Method::D2gs && !cfg.release_density_cache && !s.density_cache.empty()) {
+        std::vector<float> carried(report.source.size());
+        for (std::size_t i = 0; i < carried.size(); ++i) carried[i] = s.density_cache[report.source[i]];
+        s.density_cache = std::move(carried);
+      }
+      skip_step = true;  // the new tensors carry no gradient this iteration
+      s.log << nlohmann::json{{"event", "densify"}, {"iteration", t}, {"cloned", report.cloned}, {"split", report.split},
+                              {"pruned", report.pruned}, {"gaussians", report.after}}.dump() << '\n';
+    }
+    if (std::find(cfg.opacity_reset_at.begin(), cfg.opacity_reset_at.end(), t) != cfg.opacity_reset_at.end()) {
+      reset_opacity(s.model, s.adam);
+      skip_opacity = true;
+    }
+  }
+  if (t < cfg.iterations && !skip_step)
+    Adam::step(s.model, grads.model, s.adam, cfg.lr, means_lr, skip_opacity);
+
+  for (const auto* a : {&s.model.means, &s.model.log_scales, &s.model.quats, &s.model.opacity_logits})
+    for (float v : *a)
+      if (!std::isfinite(v)) fail("iteration {}: a model parameter became non-finite; stopping", t);
+
+  rec.gaussians = s.model.size();
+  rec.elapsed_s = s.elapsed();
+  if (t % cfg.log_every == 0 || t == cfg.iterations) {
+    s.log << nlohmann::json{{"iteration", t}, {"loss", rec.loss}, {"l1", rec.l1}, {"ssim", rec.ssim},
+                            {"dafe", rec.dafe}, {"drop_fraction", rec.drop_fraction}, {"gaussians", rec.gaussians},
+                            {"elapsed_s", rec.elapsed_s}}.dump()
+          << '\n';
+    s.log.flush();
+  }
+  return rec;
+}
+
+void Trainer::save_checkpoint(const fs::path& path) const {
+  const auto& s = *s_;
+  nlohmann::json h = {{"iteration", s.iteration}, {"active_sh", s.active_sh}, {"adam_step", s.adam.step},
+                      {"elapsed_s", s.elapsed()}, {"camera_stack", s.camera_stack}, {"sh_degree", s.model.sh_degree},
+                      {"seed", s.cfg.seed}, {"method", to_string(s.cfg.method)},
+                      {"rng_cameras", rng_json(s.rng_cameras)}, {"rng_dropout", rng_json(s.rng_dropout)},
+                      {"rng_densify", rng_json(s.rng_densify)}, {"dafe_masks", s.dafe_masks.size()}};
+  const std::string header = h.dump();
+  std::string bytes(kCheckpointMagic);
+  const std::uint64_t header_len = header.size();
+  bytes.append(reinterpret_cast<const char*>(&header_len), sizeof header_len);
+  bytes += header;
+  put_model(bytes, s.model);
+  put_model(bytes, s.adam.exp_avg);
+  put_model(bytes, s.adam.exp_avg_sq);
+  put_vec(bytes, s.stats.sums());
+  put_vec(bytes, s.stats.counts());
+  put_vec(bytes, s.density_cache);
+  for (const auto& m : s.dafe_masks) put_vec(bytes, std::vector<float>(m.begin(), m.end()));
+  write_file_atomic(path, bytes);
+}
+
+EvalSummary Trainer::evaluate_test_views(const fs::path& render_dir) const {
+  EvalOptions eo;
+  eo.render_dir = render_dir;
+  return evaluate_views(s_->model, s_->scene, s_->split.test, eo);
+}
+
+void Trainer::run() {
+  auto& s = *s_;
+  const auto& cfg = s.cfg;
+  const std::set<int> saves = cfg.save_iterations.empty() ? std::set<int>{cfg.iterations}
+                                                          : std::set<int>(cfg.save_iterations.begin(), cfg.save_iterations.end());
+  const std::set<int> checkpoints(cfg.checkpoint_iterations.begin(), cfg.checkpoint_iterations.end());
+  const std::set<int> tests(cfg.test_iterations.begin(), cfg.test_iterations.end());
+  const bool tty = ::isatty(STDERR_FILENO) != 0;
+  const int start = s.iteration;
+  const auto t0 = Clock::now();
+  auto last_print = t0;
+  int last_decile = -1;
+  double ema_loss = 0.0;
+  while (s.iteration < cfg.iterations) {
+    const IterationRecord rec = step();
+    const int t = rec.iteration;
+    ema_loss = t == start + 1 ? rec.loss : 0.6 * rec.loss + 0.4 * ema_loss;
+    if (saves.count(t)) {
+      write_gaussians_ply(s.out() / "point_cloud" / fmt::format("iteration_{}", t) / "point_cloud.ply", s.model);
+    }
+    if (checkpoints.count(t)) save_checkpoint(s.out() / fmt::format("chkpnt{}.bin", t));
+    if (tests.count(t)) {
+      const auto e = evaluate_test_views();
+      s.log << nlohmann::json{{"event", "test"}, {"iteration", t}, {"psnr", e.psnr}, {"ssim", e.ssim}}.dump() << '\n';
+      if (!cfg.quiet) spdlog::info("iteration {}: test PSNR {:.3f} SSIM {:.4f}", t, e.psnr, e.ssim);
+    }
+    if (!cfg.quiet) {
+      const auto now = Clock::now();
+      const double secs = std::chrono::duration<double>(now - t0).count();
+      const double rate = (t - start) / std::max(secs, 1e-9);
+      const double eta = (cfg.iterations - t) / std::max(rate, 1e-9);
+      const std::string line = fmt::format("[train {}] it {}/{}  {:.1f} it/s  loss {:.4f}  #G {}  elapsed {}  ETA {}",
+                                           to_string(cfg.method), t, cfg.iterations, rate, ema_loss, rec.gaussians,
+                                           format_duration(s.elapsed()), format_duration(eta));
+      if (tty && (std::chrono::duration<double>(now - last_print).count() > 0.25 || t == cfg.iterations)) {
+        std::fprintf(stderr, "\r%s\033[K", line.c_str());
+        last_print = now;
+      } else if (!tty) {
+        const int decile = static_cast<int>(10.0 * t / cfg.iterations);
+        if (decile != last_decile) {
+          std::fprintf(stderr, "%s\n", line.c_str());
+          last_decile = decile;
+        }
+      }
+    }
+  }
+  if (!cfg.quiet && ::isatty(STDERR_FILENO)) std::fprintf(stderr, "\n");
+  // Final evaluation on the held-out views, in the original render.py layout.
+  if (!s.split.test.empty()) {
+    const auto e = evaluate_test_views(s.out() / "test" / fmt::format("ours_{}", s.iteration));
+    nlohmann::json j;
+    to_json(j, e);
+    j["method"] = to_string(cfg.method);
+    j["iteration"] = s.iteration;
+    j["gaussians"] = s.model.size();
+    j["train_seconds"] = s.elapsed();
+    j["init_is_oracle"] = s.oracle_init;
+    write_file_atomic(s.out() / "results.json", j.dump(2));
+    if (!cfg.quiet) std::fprintf(stdout, "%s", format_table(e).c_str());
+  }
+}
+
+}  // namespace d2gs

@@ -1,0 +1,66 @@
+#pragma once
+// The training loop of 3DGS / DropGaussian / D²GS (method.md §2, §4, §5) on the CPU rasterizer, with
+// the original's iteration order: learning-rate schedule, SH degree, camera from a random permutation,
+// dropout mask, render, loss (L1 + λ·D-SSIM [+ DAFE]) on the clamped image, backward, densification
+// statistics and edits, opacity reset, Adam step. Outputs in the layout of the original code.
+#include <filesystem>
+#include <functional>
+#include <memory>
+
+#include "d2gs/eval/evaluate.hpp"
+#include "d2gs/model/gaussians.hpp"
+#include "d2gs/scene/scene.hpp"
+#include "d2gs/scene/split.hpp"
+#include "d2gs/train/config.hpp"
+
+namespace d2gs {
+
+struct IterationRecord {
+  int iteration = 0;
+  double loss = 0, l1 = 0, ssim = 0, dafe = 0;
+  double drop_fraction = 0;  // share of Gaussians masked out this iteration
+  std::size_t gaussians = 0;
+  double elapsed_s = 0;
+};
+
+class Trainer {
+public:
+  // Loads the scene (training views only) and builds the initial model, or restores `resume_from`.
+  explicit Trainer(TrainConfig config, const std::filesystem::path& resume_from = {});
+  ~Trainer();
+  Trainer(const Trainer&) = delete;
+  Trainer& operator=(const Trainer&) = delete;
+
+  // Runs to config.iterations with progress, logs, saves, checkpoints and the final evaluation.
+  void run();
+  // One iteration (the building block of run(); tests call it directly).
+  IterationRecord step();
+
+  int iteration() const;
+  const Gaussians& model() const;
+  const Scene& scene() const;
+  const Split& split() const;
+  const TrainConfig& config() const;
+  float scene_extent() const;
+  bool init_is_oracle() const;  // the initial cloud saw the test views (sfm-all-views)
+
+  // Checkpoint: everything needed to continue bit-identically (model, moments, statistics, random
+  // streams, camera queue, D²GS caches). Written atomically.
+  void save_checkpoint(const std::filesystem::path& path) const;
+
+  // Renders and scores the test views with the current model (no dropout).
+  EvalSummary evaluate_test_views(const std::filesystem::path& render_dir = {}) const;
+
+  struct State;  // opaque: defined in trainer.cpp
+
+private:
+  std::unique_ptr<State> s_;
+};
+
+// Random initial cloud: `count` points uniform in the region seen by the training cameras (each point
+// is a random pixel ray of a random training view at a depth uniform in [0.5, 10]·scene extent... see
+// trainer.cpp), random colours.
+PointCloud random_point_cloud(const Scene& scene, const std::vector<int>& train_views, int count, float extent,
+                              std::uint64_t seed);
+
+}  // namespace d2gs

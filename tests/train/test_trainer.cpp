@@ -1,0 +1,138 @@
+// End-to-end training on real data (fern, 3 views, 504×378): short runs that check learning,
+// determinism, resume and the output layout.
+#include <gtest/gtest.h>
+
+#include <nlohmann/json.hpp>
+
+#include "d2gs/core/atomic_file.hpp"
+#include "d2gs/core/error.hpp"
+#include "d2gs/model/ply.hpp"
+#include "d2gs/train/trainer.hpp"
+#include "test_paths.hpp"
+
+namespace d2gs {
+namespace {
+namespace fs = std::filesystem;
+
+TrainConfig fern_config(const fs::path& out, Method method, int iterations) {
+  TrainConfig c;
+  c.source = (test::shared_data() / "nerf_llff_data/fern").string();
+  c.model_dir = out.string();
+  c.resolution = 8;
+  c.n_views = 3;
+  c.method = method;
+  c.iterations = iterations;
+  c.quiet = true;
+  c.seed = 1;
+  return c;
+}
+
+TEST(Trainer, TestPsnrRisesWellAboveTheInitialRender) {
+  const auto dir = test::scratch_dir();
+  auto cfg = fern_config(dir / "run", Method::Gs3d, 300);
+  cfg.densify_from = 100;  // densify within the short schedule
+  Trainer trainer(cfg);
+  const double before = trainer.evaluate_test_views().psnr;
+  trainer.run();
+  const auto results = nlohmann::json::parse(read_file(dir / "run/results.json"));
+  const double after = results["mean"]["PSNR"];
+  RecordProperty("psnr_before", std::to_string(before));
+  RecordProperty("psnr_after", std::to_string(after));
+  std::printf("fern 3 views, 300 iterations: test PSNR %.2f -> %.2f dB\n", before, after);
+  EXPECT_GT(after, before + 3.0);
+  EXPECT_TRUE(results["init_is_oracle"].get<bool>());
+  // The original layout.
+  EXPECT_TRUE(fs::exists(dir / "run/point_cloud/iteration_300/point_cloud.ply"));
+  EXPECT_TRUE(fs::exists(dir / "run/cameras.json"));
+  EXPECT_TRUE(fs::exists(dir / "run/config.json"));
+  EXPECT_TRUE(fs::exists(dir / "run/input.ply"));
+  EXPECT_TRUE(fs::exists(dir / "run/test/ours_300/renders/image000.png"));
+  EXPECT_TRUE(fs::exists(dir / "run/test/ours_300/gt/image008.png"));
+  const auto cams = nlohmann::json::parse(read_file(dir / "run/cameras.json"));
+  EXPECT_EQ(cams.size(), 6u);
+  const Gaussians saved = read_gaussians_ply(dir / "run/point_cloud/iteration_300/point_cloud.ply");
+  EXPECT_EQ(saved.size(), trainer.model().size());
+}
+
+TEST(Trainer, SameSeedSameModelAndResumeIsBitIdentical) {
+  const auto dir = test::scratch_dir();
+  auto cfg = fern_config(dir / "a", Method::DropGaussian, 40);
+  cfg.densify_from = 10;
+  cfg.densify_every = 10;
+  cfg.opacity_reset_at = {25};
+  cfg.checkpoint_iterations = {20};
+  Trainer a(cfg);
+  a.run();
+  auto cfg_b = cfg;
+  cfg_b.model_dir = (dir / "b").string();
+  cfg_b.checkpoint_iterations = {};
+  Trainer b(cfg_b);
+  b.run();
+  EXPECT_EQ(a.model().means, b.model().means);
+  EXPECT_EQ(a.model().opacity_logits, b.model().opacity_logits);
+  EXPECT_EQ(a.model().sh_rest, b.model().sh_rest);
+
+  auto cfg_c = cfg_b;
+  cfg_c.model_dir = (dir / "c").string();
+  Trainer c(cfg_c, dir / "a/chkpnt20.bin");
+  EXPECT_EQ(c.iteration(), 20);
+  c.run();
+  EXPECT_EQ(c.model().size(), a.model().size());
+  EXPECT_EQ(c.model().means, a.model().means);
+  EXPECT_EQ(c.model().log_scales, a.model().log_scales);
+  EXPECT_EQ(c.model().opacity_logits, a.model().opacity_logits);
+  EXPECT_EQ(c.model().sh_dc, a.model().sh_dc);
+
+  auto cfg_d = cfg_b;
+  cfg_d.model_dir = (dir / "d").string();
+  cfg_d.seed = 2;
+  Trainer d(cfg_d);
+  d.run();
+  EXPECT_NE(d.model().means, a.model().means);
+}
+
+TEST(Trainer, D2gsDropsNearDenseGaussiansAndRuns) {
+  const auto dir = test::scratch_dir();
+  auto cfg = fern_config(dir / "run", Method::D2gs, 12);
+  cfg.dd_drop.rate_min = 0.3;  // make the drop visible in a short run
+  Trainer t(cfg);
+  double dropped = 0;
+  for (int i = 0; i < 12; ++i) dropped += t.step().drop_fraction;
+  EXPECT_GT(dropped / 12, 0.02);
+  EXPECT_LT(dropped / 12, 0.3);
+}
+
+TEST(Trainer, RefusesToOverwriteAndRejectsBadCheckpoints) {
+  const auto dir = test::scratch_dir();
+  write_file_atomic(dir / "user/notes.txt", "precious");
+  EXPECT_THROW(Trainer(fern_config(dir / "user", Method::Gs3d, 5)), Error);
+  EXPECT_EQ(read_file(dir / "user/notes.txt"), "precious");
+  write_file_atomic(dir / "bad.bin", "not a checkpoint");
+  EXPECT_THROW(Trainer(fern_config(dir / "r", Method::Gs3d, 5), dir / "bad.bin"), Error);
+  auto cfg = fern_config(dir / "x", Method::Gs3d, 5);
+  cfg.resolution = 3;
+  EXPECT_THROW(Trainer{cfg}, Error);
+}
+
+TEST(TrainConfig, JsonRoundTripAndUnknownKeys) {
+  TrainConfig c;
+  c.source = "s";
+  c.model_dir = "m";
+  c.method = Method::D2gs;
+  c.dd_drop.weight_depth = 0.7;
+  c.dafe_loss_form = DafeLossForm::Release;
+  c.opacity_reset_at = {100};
+  nlohmann::json j;
+  to_json(j, c);
+  TrainConfig d;
+  update_from_json(d, j);
+  nlohmann::json k;
+  to_json(k, d);
+  EXPECT_EQ(j, k);
+  EXPECT_THROW(update_from_json(d, nlohmann::json{{"iteratons", 5}}), Error);
+  EXPECT_THROW(update_from_json(d, nlohmann::json{{"iterations", "many"}}), Error);
+  EXPECT_THROW(update_from_json(d, nlohmann::json{{"method", "nerf"}}), Error);
+}
+
+}  // namespace
+}  // namespace d2gs
