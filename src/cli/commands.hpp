@@ -12,5 +12,7 @@ using Run = std::function<int()>;
 Run add_info_command(CLI::App& app);
 Run add_demo_command(CLI::App& app);
 Run add_render_command(CLI::App& app);
+Run add_train_command(CLI::App& app);
+Run add_eval_command(CLI::App& app);
 
 }  // namespace d2gs::cli
