@@ -82,8 +82,8 @@ void print_table(const Scene& scene, const Split& split) {
   s += fmt::format("format      {}\n", to_string(scene.format));
   s += fmt::format("images      {} (resolution 1/{})\n", scene.images_folder, scene.resolution);
   s += fmt::format("cameras     {}\n", scene.cameras.size());
-  s += fmt::format("train ({})   {}\n", split.train.size(), join(split.train));
-  s += fmt::format("test ({})    {}\n", split.test.size(), join(split.test));
+  s += fmt::format("{:<12}{}\n", fmt::format("train ({})", split.train.size()), join(split.train));
+  s += fmt::format("{:<12}{}\n", fmt::format("test ({})", split.test.size()), join(split.test));
   s += fmt::format("points      {}{}\n", scene.sfm_points.size(),
                    scene.sfm_points.empty() ? "" : " (dataset points3D, triangulated from all views: oracle only)");
   s += fmt::format("\n{:>5}  {:<16} {:>11} {:>10} {:>10} {:>9} {:>9}  {:<5}  {}\n", "index", "name", "size", "fx", "fy",

@@ -270,6 +270,22 @@ TEST(Colmap, SimplePinholeAndUnsupportedModels) {
   EXPECT_EQ(colmap_model_num_params(11), 16);
 }
 
+TEST(Colmap, AspectMismatchBetweenCameraAndImagesWarns) {
+  const auto dir = test::scratch_dir();
+  ColmapCamera cam;
+  cam.id = 1;
+  cam.model_id = static_cast<int>(ColmapCameraModel::Pinhole);
+  cam.width = 4032;
+  cam.height = 4032;  // the images are 4:3
+  cam.params = {3000, 3000, 2016, 2016};
+  SceneLoadOptions o;
+  o.resolution = 8;
+  const Scene s = load_scene(make_fern_colmap(dir, {cam}), o);
+  ASSERT_EQ(s.warnings.size(), 1u);
+  EXPECT_NE(s.warnings[0].find("aspect"), std::string::npos);
+  EXPECT_NEAR(s.cameras[0].fy, 3000.0 * 378 / 4032, 1e-9);
+}
+
 TEST(Colmap, ImagesRefersToUnknownCameraOrDuplicateName) {
   const auto dir = test::scratch_dir();
   const auto root = test::make_room_copy(dir);

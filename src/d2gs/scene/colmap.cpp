@@ -5,9 +5,6 @@
 #include <charconv>
 #include <cmath>
 #include <cstring>
-#include <limits>
-#include <map>
-#include <set>
 #include <type_traits>
 #include <unordered_map>
 
@@ -584,6 +581,7 @@ Scene load_colmap_scene(const fs::path& root, const SceneLoadOptions& options) {
   const auto folder = choose_image_folder(root, options.resolution);
   scene.images_folder = folder.folder;
   scene.cameras.reserve(images.size());
+  bool warned_aspect = false;
   for (const auto& im : images) {
     const auto it = by_id.find(im.camera_id);
     if (it == by_id.end())
@@ -606,6 +604,14 @@ Scene load_colmap_scene(const fs::path& root, const SceneLoadOptions& options) {
       fx = c.params[0], fy = c.params[1], cx = c.params[2], cy = c.params[3];
     } else {  // SIMPLE_PINHOLE, SIMPLE_RADIAL: f cx cy [k]
       fx = fy = c.params[0], cx = c.params[1], cy = c.params[2];
+    }
+    if (!warned_aspect && std::abs(sx / sy - 1.0) > 0.02) {
+      warned_aspect = true;
+      const auto msg = fmt::format("{}: image is {}x{} but camera {} in {} is {}x{}: the aspect ratios differ",
+                                   cam.image_path.string(), cam.width, cam.height, c.id,
+                                   cameras_path.filename().string(), c.width, c.height);
+      spdlog::warn("{}", msg);
+      scene.warnings.push_back(msg);
     }
     cam.fx = fx * sx;
     cam.fy = fy * sy;

@@ -123,7 +123,8 @@ Scene load_llff_scene(const fs::path& root, const SceneLoadOptions& options) {
 
   const fs::path sparse = root / "sparse" / "0";
   if (has_colmap_points3D(sparse)) {
-    const auto points_path = fs::is_regular_file(sparse / "points3D.bin") ? sparse / "points3D.bin" : sparse / "points3D.txt";
+    std::error_code ec;
+    const auto points_path = fs::is_regular_file(sparse / "points3D.bin", ec) ? sparse / "points3D.bin" : sparse / "points3D.txt";
     scene.sfm_points = colmap_point_cloud(read_colmap_points3D(sparse), points_path);
   }
   return scene;

@@ -11,9 +11,9 @@
 //
 // World frame: x right, y down, z forward (away from the cameras), i.e. the OpenCV camera frame of a
 // camera at the origin looking at the scene. The ground is the plane y = 1.2 (below the cameras), the
-// backdrop the plane z = 40. Cameras sit on a small serpentine grid in the plane z = 0 (about 1.0 x 0.6
-// units) and all look at a focus point near (0, 0.1, 9), so they face +z with a few degrees of toe-in,
-// as in a hand-held LLFF capture. Nearest surfaces are about 2.5 units away, the backdrop about 40:
+// backdrop the plane z = 40. Cameras sit on a small grid in the plane z = 0 (about 1.0 x 0.6 units,
+// 5 x 4 for 20 views, numbered row by row from the top left) and all look at a focus point near
+// (0, 0.1, 9), so they face +z with a few degrees of toe-in, as in a hand-held LLFF capture. Nearest surfaces are about 2.5 units away, the backdrop about 40:
 // a near and a far field. Everything (layout jitter, colours, texture phases) follows from the seed;
 // the output is bit-identical for equal options, whatever the thread count.
 #include <cstdint>
