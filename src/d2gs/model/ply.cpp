@@ -326,7 +326,7 @@ private:
 
 // Reads the elements of `header` in file order up to and including `target`, skipping the others.
 // For every item of the target and every scalar property p with slot[p] >= 0, calls
-// sink(item_index, p, value). List properties are skipped in every element.
+// sink(item_index, slot[p], value). List properties are skipped in every element.
 class ElementReader {
 public:
   ElementReader(std::string_view bytes, const PlyHeader& header, const fs::path& src)
@@ -389,11 +389,11 @@ private:
         return;
       }
       // Fixed stride: offsets of the wanted properties.
-      struct Wanted { std::size_t offset; PlyType type; int prop; };
+      struct Wanted { std::size_t offset; PlyType type; int slot; };
       std::vector<Wanted> wanted;
       std::size_t offset = 0;
       for (std::size_t p = 0; p < e.properties.size(); ++p) {
-        if ((*slot)[p] >= 0) wanted.push_back({offset, e.properties[p].type, static_cast<int>(p)});
+        if ((*slot)[p] >= 0) wanted.push_back({offset, e.properties[p].type, (*slot)[p]});
         offset += type_size(e.properties[p].type);
       }
       const bool swap = cur.swap();
@@ -403,7 +403,7 @@ private:
         for (const auto& w : wanted) {
           Value v;
           v.number = load_value(row + w.offset, w.type, swap);
-          sink(i, w.prop, v);
+          sink(i, w.slot, v);
         }
       }
       return;
@@ -420,7 +420,7 @@ private:
           cur.skip(static_cast<std::size_t>(n) * item);
         } else {
           if (!cur.read(prop.type, v)) truncated(e, i, prop);
-          if (slot && (*slot)[p] >= 0) sink(i, static_cast<int>(p), v);
+          if (slot && (*slot)[p] >= 0) sink(i, (*slot)[p], v);
         }
       }
     }
@@ -443,7 +443,7 @@ private:
             if (!cur.read(prop.type, v, bad)) truncated(e, i, prop);
         } else {
           if (!cur.read(prop.type, v, bad)) truncated(e, i, prop);
-          if (slot && (*slot)[p] >= 0) sink(i, static_cast<int>(p), v);
+          if (slot && (*slot)[p] >= 0) sink(i, (*slot)[p], v);
         }
       }
     }
@@ -573,15 +573,17 @@ Gaussians parse_gaussians_ply(std::string_view bytes, const fs::path& src) {
     std::vector<float>* array;
     std::size_t stride;
     std::size_t offset;
-    std::string name;
+    float* base = nullptr;  // array->data() + offset, set once the model is sized
   };
   Gaussians model;
   std::vector<Target> targets;
+  std::vector<std::string> target_names;
   std::vector<int> slot(vertex.properties.size(), -1);
   const auto want = [&](const std::string& name, std::vector<float>* array, std::size_t stride, std::size_t offset) {
     const int p = require_property(vertex, name, src);
     slot[static_cast<std::size_t>(p)] = static_cast<int>(targets.size());
-    targets.push_back({array, stride, offset, name});
+    targets.push_back({array, stride, offset});
+    target_names.push_back(name);
   };
   static constexpr const char* xyz[] = {"x", "y", "z"};
   for (std::size_t j = 0; j < 3; ++j) want(xyz[j], &model.means, 3, j);
@@ -595,15 +597,17 @@ Gaussians parse_gaussians_ply(std::string_view bytes, const fs::path& src) {
 
   check_vertex_count(bytes, header, vertex, src);  // before anything is allocated
   model.resize(static_cast<std::size_t>(vertex.count), degree);
+  if (!model.empty())  // (no pointer arithmetic on the null data() of empty arrays)
+    for (auto& t : targets) t.base = t.array->data() + t.offset;
 
   ElementReader reader(bytes, header, src);
-  reader.read(vertex, slot, [&](std::uint64_t i, int p, const Value& v) {
-    const Target& t = targets[static_cast<std::size_t>(slot[static_cast<std::size_t>(p)])];
+  reader.read(vertex, slot, [&](std::uint64_t i, int s, const Value& v) {
+    const Target& t = targets[static_cast<std::size_t>(s)];
     const float f = v.as_float();
-    if (!std::isfinite(f))
-      fail_file(src, "vertex {}: property '{}' is {}", i, t.name,
+    if (!std::isfinite(f)) [[unlikely]]
+      fail_file(src, "vertex {}: property '{}' is {}", i, target_names[static_cast<std::size_t>(s)],
                 std::isnan(f) ? "NaN" : (std::isfinite(v.number) ? "out of float range" : "infinite"));
-    (*t.array)[static_cast<std::size_t>(i) * t.stride + t.offset] = f;
+    t.base[static_cast<std::size_t>(i) * t.stride] = f;
   });
   return model;
 }
@@ -670,8 +674,7 @@ PointCloud parse_point_cloud_ply(std::string_view bytes, const fs::path& src) {
   cloud.colors.assign(n, glm::u8vec3(128));
 
   ElementReader reader(bytes, header, src);
-  reader.read(vertex, slot, [&](std::uint64_t i, int p, const Value& v) {
-    const int s = slot[static_cast<std::size_t>(p)];
+  reader.read(vertex, slot, [&](std::uint64_t i, int s, const Value& v) {
     const auto idx = static_cast<std::size_t>(i);
     if (s < 3) {
       const float f = v.as_float();
@@ -683,7 +686,9 @@ PointCloud parse_point_cloud_ply(std::string_view bytes, const fs::path& src) {
     const int c = s - 3;
     const PlyType t = colour_type[static_cast<std::size_t>(c)];
     double value = v.number;
-    if (std::isnan(value)) fail_file(src, "vertex {}: colour property '{}' is NaN", i, vertex.properties[static_cast<std::size_t>(p)].name);
+    if (std::isnan(value))
+      fail_file(src, "vertex {}: colour property '{}' is NaN", i,
+                vertex.properties[static_cast<std::size_t>(colour_prop[static_cast<std::size_t>(c)])].name);
     if (!is_integer(t)) value *= 255.0;                                     // float colours in [0, 1]
     else if (t == PlyType::UInt16 || t == PlyType::Int16) value /= 257.0;   // 16-bit colours
     value = std::clamp(std::round(value), 0.0, 255.0);
