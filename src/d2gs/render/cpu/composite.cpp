@@ -1,6 +1,7 @@
 #include "d2gs/render/cpu/composite.hpp"
 
 #include <algorithm>
+#include <cstring>
 
 #include "d2gs/render/cpu/simd_math.hpp"
 #include "d2gs/render/raster_math.hpp"
@@ -9,8 +10,7 @@ namespace d2gs::render::cpu {
 
 namespace {
 
-constexpr int S = kTileSize;
-constexpr int L = S * S;
+constexpr int S = kTileSize;  // pixels per tile row = lanes of Row<T>
 
 template <typename T>
 struct SmoothConstants {
@@ -20,127 +20,168 @@ struct SmoothConstants {
   static constexpr T inv_power_range = T(1.0 / (kSmoothPowerHi - kSmoothPowerLo));
 };
 
+// Lane-wise helpers on tile rows.
+template <typename V>
+inline V smoothstep_row(V e) {
+  e = e < 0 ? V{} : e;
+  e = e > 1 ? V{} + 1 : e;
+  return e * e * (3 - 2 * e);
+}
+template <typename V>
+inline V smoothstep_grad_row(V e) {
+  return (e <= 0) | (e >= 1) ? V{} : 6 * e * (1 - e);
+}
+template <typename M>
+inline bool any_lane(M m) {
+  const M zero{};
+  return std::memcmp(&m, &zero, sizeof m) != 0;
+}
+
 template <typename T, bool Smooth>
 void forward_tile(const Binning<T>& bin, int tile, const T bg[3], T* rgb, T* alpha_out, T* depth_out,
                   PixelState<T>& state) {
-  alignas(64) T Tr[L], cr[L], cg[L], cb[L], cd[L];
-  alignas(64) int last[L], done[L];
+  using V = typename Row<T>::V;
+  using M = typename Row<T>::M;
+  constexpr int VL = Row<T>::kLanes, C = S / VL;  // lanes per vector, vectors per tile row
+  V Tr[S * C], cr[S * C], cg[S * C], cb[S * C], cd[S * C];
+  M last[S * C], done[S * C];
   int row_alive[S];
   const int W = bin.width, H = bin.height;
   const int px0 = (tile % bin.tiles_x) * S, py0 = (tile / bin.tiles_x) * S;
   const int nrows = std::min(S, H - py0), ncols = std::min(S, W - px0);
+  V xs[C];
+  M outside_cols[C];
+  for (int x = 0; x < S; ++x) {
+    xs[x / VL][x % VL] = T(px0 + x);
+    outside_cols[x / VL][x % VL] = x < ncols ? 0 : -1;
+  }
   int alive = 0;
   for (int y = 0; y < S; ++y) {
-    row_alive[y] = 0;
-    for (int x = 0; x < S; ++x) {
-      const int l = y * S + x;
-      const bool inside = y < nrows && x < ncols;
-      Tr[l] = T(1);
-      cr[l] = cg[l] = cb[l] = cd[l] = T(0);
-      last[l] = 0;
-      done[l] = inside ? 0 : 1;
-      row_alive[y] += inside ? 1 : 0;
+    for (int c = 0; c < C; ++c) {
+      const int k = y * C + c;
+      Tr[k] = V{} + T(1);
+      cr[k] = cg[k] = cb[k] = cd[k] = V{};
+      last[k] = M{};
+      done[k] = y < nrows ? outside_cols[c] : M{} - 1;
     }
+    row_alive[y] = y < nrows ? ncols : 0;
     alive += row_alive[y];
   }
   const int begin = bin.tile_offsets[tile], end = bin.tile_offsets[tile + 1];
   for (int j = begin; j < end && alive > 0; ++j) {
     const Splat<T>& s = bin.splats[bin.isect_rank[j]];
     const int y_lo = std::max(s.y0 - py0, 0), y_hi = std::min(s.y1 - py0, nrows - 1);
-    const int jl = j - begin + 1;
-    const T mx = s.mx, qa = s.qa, qb = s.qb, qc = s.qc, o = s.opacity;
+    // Vectors of the row that the alpha box reaches (the box overlaps the tile, see binning).
+    const int c_lo = std::max(s.x0 - px0, 0) / VL, c_hi = std::min(s.x1 - px0, S - 1) / VL;
+    const M jl = M{} + (j - begin + 1);
+    const T qa = s.qa, qb = s.qb, qc = s.qc, o = s.opacity;
     const T sr = s.r, sg = s.g, sb = s.b, sz = s.z;
+    V dxs[C], hqa_dx2s[C];
+    for (int c = 0; c < C; ++c) {
+      dxs[c] = s.mx - xs[c];
+      hqa_dx2s[c] = qa * dxs[c] * dxs[c];
+    }
+    M stopped{};
     for (int y = y_lo; y <= y_hi; ++y) {
       if (row_alive[y] == 0) continue;
       const T dy = s.my - T(py0 + y);
-      T* tr = Tr + y * S;
-      T* r_ = cr + y * S;
-      T* g_ = cg + y * S;
-      T* b_ = cb + y * S;
-      T* d_ = cd + y * S;
-      int* la = last + y * S;
-      int* dn = done + y * S;
-      int newly_done = 0;
-#pragma omp simd reduction(+ : newly_done)
-      for (int x = 0; x < S; ++x) {
-        const T dx = mx - T(px0 + x);
-        const T power = T(-0.5) * (qa * dx * dx + qc * dy * dy) - qb * dx * dy;
-        const T og = o * exp_lanes(power);
-        T alpha = og < T(kAlphaMax) ? og : T(kAlphaMax);
-        bool ok;
-        if constexpr (Smooth) {
-          using K = SmoothConstants<T>;
-          alpha = alpha * smoothstep01((alpha - K::alpha_lo) * K::inv_alpha_range) *
-                  smoothstep01((power - K::power_lo) * K::inv_power_range);
-          ok = (power <= T(0)) & (alpha > T(0)) & (dn[x] == 0);
-        } else {
-          ok = (power <= T(0)) & (alpha >= T(kAlphaMin)) & (dn[x] == 0);
-        }
-        const T t_cur = tr[x];
-        const T t_next = t_cur * (T(1) - alpha);
-        const bool stop = Smooth ? false : (ok & (t_next < T(kTransmittanceMin)));
-        const bool comp = ok & !stop;
-        const T w = comp ? alpha * t_cur : T(0);
-        r_[x] += w * sr;
-        g_[x] += w * sg;
-        b_[x] += w * sb;
-        d_[x] += w * sz;
-        tr[x] = comp ? t_next : t_cur;
-        la[x] = comp ? jl : la[x];
-        dn[x] = stop ? 1 : dn[x];
-        newly_done += stop ? 1 : 0;
+      for (int c = c_lo; c <= c_hi; ++c) {
+      const int k = y * C + c;
+      const V dx = dxs[c], hqa_dx2 = hqa_dx2s[c];
+      const V power = T(-0.5) * (hqa_dx2 + qc * dy * dy) - qb * dx * dy;
+      const V og = o * exp_row(power);
+      V alpha = og < T(kAlphaMax) ? og : V{} + T(kAlphaMax);
+      M ok;
+      if constexpr (Smooth) {
+        using K = SmoothConstants<T>;
+        alpha = alpha * smoothstep_row((alpha - K::alpha_lo) * K::inv_alpha_range) *
+                smoothstep_row((power - K::power_lo) * K::inv_power_range);
+        ok = (power <= T(0)) & (alpha > T(0)) & ~done[k];
+      } else {
+        ok = (power <= T(0)) & (alpha >= T(kAlphaMin)) & ~done[k];
       }
-      row_alive[y] -= newly_done;
-      alive -= newly_done;
+      const V t_cur = Tr[k];
+      const V t_next = t_cur * (T(1) - alpha);
+      M stop{};
+      if constexpr (!Smooth) stop = ok & (t_next < T(kTransmittanceMin));
+      const M comp = ok & ~stop;
+      const V w = comp ? alpha * t_cur : V{};
+      cr[k] += w * sr;
+      cg[k] += w * sg;
+      cb[k] += w * sb;
+      cd[k] += w * sz;
+      Tr[k] = comp ? t_next : t_cur;
+      last[k] = comp ? jl : last[k];
+      done[k] |= stop;
+      stopped |= stop;
+      }
+    }
+    if (!Smooth && any_lane(stopped)) {  // some pixels are done: recount the rows they are in
+      alive = 0;
+      for (int y = 0; y < S; ++y) {
+        int a = 0;
+        for (int x = 0; x < S; ++x) a += done[y * C + x / VL][x % VL] == 0;
+        row_alive[y] = a;
+        alive += a;
+      }
     }
   }
   for (int y = 0; y < nrows; ++y)
     for (int x = 0; x < ncols; ++x) {
-      const int l = y * S + x;
       const std::size_t p = static_cast<std::size_t>(py0 + y) * W + (px0 + x);
+      const int k = y * C + x / VL, l = x % VL;
+      const T t = Tr[k][l];
       if (rgb) {
-        rgb[p * 3 + 0] = cr[l] + Tr[l] * bg[0];
-        rgb[p * 3 + 1] = cg[l] + Tr[l] * bg[1];
-        rgb[p * 3 + 2] = cb[l] + Tr[l] * bg[2];
+        rgb[p * 3 + 0] = cr[k][l] + t * bg[0];
+        rgb[p * 3 + 1] = cg[k][l] + t * bg[1];
+        rgb[p * 3 + 2] = cb[k][l] + t * bg[2];
       }
-      if (alpha_out) alpha_out[p] = T(1) - Tr[l];
-      if (depth_out) depth_out[p] = cd[l];
-      state.final_transmittance[p] = Tr[l];
-      state.n_contrib[p] = last[l];
+      if (alpha_out) alpha_out[p] = T(1) - t;
+      if (depth_out) depth_out[p] = cd[k][l];
+      state.final_transmittance[p] = t;
+      state.n_contrib[p] = static_cast<int>(last[k][l]);
     }
 }
 
 template <typename T, bool Smooth>
 void backward_tile(const Binning<T>& bin, int tile, const T bg[3], const PixelState<T>& state, const T* d_rgb,
                    const T* d_alpha, const T* d_depth, T* isect_grads) {
-  alignas(64) T Tc[L], ar[L], ag[L], ab[L], ad[L], gr[L], gg[L], gb[L], gd[L], tgb[L];
-  alignas(64) int last[L];
+  using V = typename Row<T>::V;
+  using M = typename Row<T>::M;
+  constexpr int VL = Row<T>::kLanes, C = S / VL;
+  V Tc[S * C], ar[S * C], ag[S * C], ab[S * C], ad[S * C], gr[S * C], gg[S * C], gb[S * C], gd[S * C], tgb[S * C];
+  M last[S * C];
   int row_max[S];
   const int W = bin.width, H = bin.height;
   const int px0 = (tile % bin.tiles_x) * S, py0 = (tile / bin.tiles_x) * S;
   const int nrows = std::min(S, H - py0), ncols = std::min(S, W - px0);
+  V xs[C];
+  for (int x = 0; x < S; ++x) xs[x / VL][x % VL] = T(px0 + x);
   int tile_max = 0;
   for (int y = 0; y < S; ++y) {
+    for (int c = 0; c < C; ++c) {
+      const int k = y * C + c;
+      Tc[k] = ar[k] = ag[k] = ab[k] = ad[k] = V{};
+      gr[k] = gg[k] = gb[k] = gd[k] = tgb[k] = V{};
+      last[k] = M{};
+    }
     row_max[y] = 0;
-    for (int x = 0; x < S; ++x) {
-      const int l = y * S + x;
-      Tc[l] = ar[l] = ag[l] = ab[l] = ad[l] = T(0);
-      gr[l] = gg[l] = gb[l] = gd[l] = tgb[l] = T(0);
-      last[l] = 0;
-      if (y >= nrows || x >= ncols) continue;
+    if (y >= nrows) continue;
+    for (int x = 0; x < ncols; ++x) {
       const std::size_t p = static_cast<std::size_t>(py0 + y) * W + (px0 + x);
-      Tc[l] = state.final_transmittance[p];
-      last[l] = state.n_contrib[p];
+      const int k = y * C + x / VL, l = x % VL;
+      Tc[k][l] = state.final_transmittance[p];
+      last[k][l] = state.n_contrib[p];
       if (d_rgb) {
-        gr[l] = d_rgb[p * 3 + 0];
-        gg[l] = d_rgb[p * 3 + 1];
-        gb[l] = d_rgb[p * 3 + 2];
+        gr[k][l] = d_rgb[p * 3 + 0];
+        gg[k][l] = d_rgb[p * 3 + 1];
+        gb[k][l] = d_rgb[p * 3 + 2];
       }
-      if (d_depth) gd[l] = d_depth[p];
+      if (d_depth) gd[k][l] = d_depth[p];
       const T ga = d_alpha ? d_alpha[p] : T(0);
       // d out / d alpha_i through T_final: T_final / (1 - alpha_i) * (d_alpha - bg . d_rgb).
-      tgb[l] = Tc[l] * (ga - (bg[0] * gr[l] + bg[1] * gg[l] + bg[2] * gb[l]));
-      row_max[y] = std::max(row_max[y], last[l]);
+      tgb[k][l] = Tc[k][l] * (ga - (bg[0] * gr[k][l] + bg[1] * gg[k][l] + bg[2] * gb[k][l]));
+      row_max[y] = std::max(row_max[y], state.n_contrib[p]);
     }
     tile_max = std::max(tile_max, row_max[y]);
   }
@@ -148,78 +189,77 @@ void backward_tile(const Binning<T>& bin, int tile, const T bg[3], const PixelSt
   for (int jl = tile_max - 1; jl >= 0; --jl) {
     const Splat<T>& s = bin.splats[bin.isect_rank[begin + jl]];
     const int y_lo = std::max(s.y0 - py0, 0), y_hi = std::min(s.y1 - py0, nrows - 1);
-    const T mx = s.mx, qa = s.qa, qb = s.qb, qc = s.qc, o = s.opacity;
+    // Vectors of the row that the alpha box reaches (the box overlaps the tile, see binning).
+    const int c_lo = std::max(s.x0 - px0, 0) / VL, c_hi = std::min(s.x1 - px0, S - 1) / VL;
+    const T qa = s.qa, qb = s.qb, qc = s.qc, o = s.opacity;
     const T sr = s.r, sg = s.g, sb = s.b, sz = s.z;
-    T g_mx = 0, g_my = 0, g_qa = 0, g_qb = 0, g_qc = 0, g_o = 0, g_r = 0, g_g = 0, g_b = 0, g_z = 0;
+    V dxs[C], hqa_dx2s[C];
+    for (int c = 0; c < C; ++c) {
+      dxs[c] = s.mx - xs[c];
+      hqa_dx2s[c] = qa * dxs[c] * dxs[c];
+    }
+    const M jlv = M{} + jl;
+    V v_mx{}, v_my{}, v_qa{}, v_qb{}, v_qc{}, v_o{}, v_r{}, v_g{}, v_b{}, v_z{};
     for (int y = y_lo; y <= y_hi; ++y) {
       if (row_max[y] <= jl) continue;
       const T dy = s.my - T(py0 + y);
-      const int o_ = y * S;
-      T* tc = Tc + o_;
-      T* a_r = ar + o_;
-      T* a_g = ag + o_;
-      T* a_b = ab + o_;
-      T* a_d = ad + o_;
-      const T* grr = gr + o_;
-      const T* ggg = gg + o_;
-      const T* gbb = gb + o_;
-      const T* gdd = gd + o_;
-      const T* tg = tgb + o_;
-      const int* la = last + o_;
-#pragma omp simd reduction(+ : g_mx, g_my, g_qa, g_qb, g_qc, g_o, g_r, g_g, g_b, g_z)
-      for (int x = 0; x < S; ++x) {
-        const T dx = mx - T(px0 + x);
-        const T power = T(-0.5) * (qa * dx * dx + qc * dy * dy) - qb * dx * dy;
-        const T G = exp_lanes(power);
-        const T og = o * G;
-        const T alpha_raw = og < T(kAlphaMax) ? og : T(kAlphaMax);
-        T alpha = alpha_raw;
-        T d_alpha_raw_scale = T(1), d_power_extra_scale = T(0);
-        bool ok;
-        if constexpr (Smooth) {
-          using K = SmoothConstants<T>;
-          const T ea = (alpha_raw - K::alpha_lo) * K::inv_alpha_range;
-          const T ep = (power - K::power_lo) * K::inv_power_range;
-          const T sa = smoothstep01(ea), sp = smoothstep01(ep);
-          alpha = alpha_raw * sa * sp;
-          d_alpha_raw_scale = (sa + alpha_raw * smoothstep01_grad(ea) * K::inv_alpha_range) * sp;
-          d_power_extra_scale = alpha_raw * sa * smoothstep01_grad(ep) * K::inv_power_range;
-          ok = (power <= T(0)) & (alpha > T(0)) & (jl < la[x]);
-        } else {
-          ok = (power <= T(0)) & (alpha >= T(kAlphaMin)) & (jl < la[x]);
-        }
-        const T one_m = T(1) - alpha;
-        const T t_before = tc[x] / one_m;
-        const T w = alpha * t_before;
-        const T g_alpha = t_before * ((sr - a_r[x]) * grr[x] + (sg - a_g[x]) * ggg[x] + (sb - a_b[x]) * gbb[x] +
-                                      (sz - a_d[x]) * gdd[x]) +
-                          tg[x] / one_m;
-        a_r[x] = ok ? alpha * sr + one_m * a_r[x] : a_r[x];
-        a_g[x] = ok ? alpha * sg + one_m * a_g[x] : a_g[x];
-        a_b[x] = ok ? alpha * sb + one_m * a_b[x] : a_b[x];
-        a_d[x] = ok ? alpha * sz + one_m * a_d[x] : a_d[x];
-        tc[x] = ok ? t_before : tc[x];
-        g_r += ok ? w * grr[x] : T(0);
-        g_g += ok ? w * ggg[x] : T(0);
-        g_b += ok ? w * gbb[x] : T(0);
-        g_z += ok ? w * gdd[x] : T(0);
-        // alpha_raw = min(0.99, o G): no gradient through the clamp.
-        const T d_og = (ok & (og < T(kAlphaMax))) ? g_alpha * d_alpha_raw_scale : T(0);
-        const T d_pow = d_og * og + (ok ? g_alpha * d_power_extra_scale : T(0));
-        g_o += d_og * G;
-        g_mx -= d_pow * (qa * dx + qb * dy);
-        g_my -= d_pow * (qb * dx + qc * dy);
-        g_qa -= T(0.5) * d_pow * dx * dx;
-        g_qb -= d_pow * dx * dy;
-        g_qc -= T(0.5) * d_pow * dy * dy;
+      for (int c = c_lo; c <= c_hi; ++c) {
+      const int k = y * C + c;
+      const V dx = dxs[c], hqa_dx2 = hqa_dx2s[c];
+      const V power = T(-0.5) * (hqa_dx2 + qc * dy * dy) - qb * dx * dy;
+      const V G = exp_row(power);
+      const V og = o * G;
+      const V alpha_raw = og < T(kAlphaMax) ? og : V{} + T(kAlphaMax);
+      V alpha = alpha_raw;
+      V d_alpha_raw_scale = V{} + T(1), d_power_extra_scale{};
+      M ok;
+      if constexpr (Smooth) {
+        using K = SmoothConstants<T>;
+        const V ea = (alpha_raw - K::alpha_lo) * K::inv_alpha_range;
+        const V ep = (power - K::power_lo) * K::inv_power_range;
+        const V sa = smoothstep_row(ea), sp = smoothstep_row(ep);
+        alpha = alpha_raw * sa * sp;
+        d_alpha_raw_scale = (sa + alpha_raw * smoothstep_grad_row(ea) * K::inv_alpha_range) * sp;
+        d_power_extra_scale = alpha_raw * sa * smoothstep_grad_row(ep) * K::inv_power_range;
+        ok = (power <= T(0)) & (alpha > T(0)) & (jlv < last[k]);
+      } else {
+        ok = (power <= T(0)) & (alpha >= T(kAlphaMin)) & (jlv < last[k]);
+      }
+      const V one_m = T(1) - alpha;
+      const V t_before = Tc[k] / one_m;
+      const V w = alpha * t_before;
+      const V g_alpha =
+          t_before * ((sr - ar[k]) * gr[k] + (sg - ag[k]) * gg[k] + (sb - ab[k]) * gb[k] + (sz - ad[k]) * gd[k]) +
+          tgb[k] / one_m;
+      ar[k] = ok ? alpha * sr + one_m * ar[k] : ar[k];
+      ag[k] = ok ? alpha * sg + one_m * ag[k] : ag[k];
+      ab[k] = ok ? alpha * sb + one_m * ab[k] : ab[k];
+      ad[k] = ok ? alpha * sz + one_m * ad[k] : ad[k];
+      Tc[k] = ok ? t_before : Tc[k];
+      v_r += ok ? w * gr[k] : V{};
+      v_g += ok ? w * gg[k] : V{};
+      v_b += ok ? w * gb[k] : V{};
+      v_z += ok ? w * gd[k] : V{};
+      // alpha_raw = min(0.99, o G): no gradient through the clamp.
+      const V d_og = ok & (og < T(kAlphaMax)) ? g_alpha * d_alpha_raw_scale : V{};
+      const V d_pow = d_og * og + (ok ? g_alpha * d_power_extra_scale : V{});
+      v_o += d_og * G;
+      v_mx -= d_pow * (qa * dx + qb * dy);
+      v_my -= d_pow * (qb * dx + qc * dy);
+      v_qa -= T(0.5) * d_pow * dx * dx;
+      v_qb -= d_pow * dx * dy;
+      v_qc -= T(0.5) * d_pow * (dy * dy);
       }
     }
+    // Lane sums in a fixed order.
     T* out = isect_grads + static_cast<std::size_t>(begin + jl) * kIsectGradStride;
-    out[0] = g_mx; out[1] = g_my;
-    out[2] = g_qa; out[3] = g_qb; out[4] = g_qc;
-    out[5] = g_o;
-    out[6] = g_r; out[7] = g_g; out[8] = g_b;
-    out[9] = g_z;
+    const V* sums[kIsectGradStride] = {&v_mx, &v_my, &v_qa, &v_qb, &v_qc, &v_o, &v_r, &v_g, &v_b, &v_z};
+    for (int k = 0; k < kIsectGradStride; ++k) {
+      const V& v = *sums[k];
+      T acc = T(0);
+      for (int x = 0; x < VL; ++x) acc += v[x];
+      out[k] = acc;
+    }
   }
   // Intersections past the tile's last contributor get no gradient.
   const int count = bin.tile_offsets[tile + 1] - begin;
