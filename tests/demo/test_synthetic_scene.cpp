@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 #include <omp.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
@@ -41,15 +42,22 @@ SyntheticSceneOptions small_options() {
   return o;
 }
 
-// One scene written for the read-only tests of this file.
+// One scene written for the read-only tests of this file, per process (CTest runs tests in parallel
+// processes), removed at exit.
 const fs::path& shared_scene() {
-  static const fs::path dir = [] {
-    const auto d = fs::temp_directory_path() / "d2gs-tests" / "synthetic-shared";
-    fs::remove_all(d);
-    write_synthetic_scene(d, small_options());
-    return d;
-  }();
-  return dir;
+  struct Shared {
+    fs::path dir = fs::temp_directory_path() / "d2gs-tests" / fmt::format("synthetic-shared-{}", ::getpid());
+    Shared() {
+      fs::remove_all(dir);
+      write_synthetic_scene(dir, small_options());
+    }
+    ~Shared() {
+      std::error_code ec;
+      fs::remove_all(dir, ec);
+    }
+  };
+  static const Shared shared;
+  return shared.dir;
 }
 
 std::vector<fs::path> files_below(const fs::path& dir) {
