@@ -73,6 +73,8 @@ TEST(Npy, BadInputsNameTheFile) {
   expect_error(npy_bytes("{'descr': '<c16', 'fortran_order': False, 'shape': (1,), }", std::string(16, '\0')),
                "not supported");
   expect_error(npy_bytes("{'fortran_order': False, 'shape': (1,), }", std::string(16, '\0')), "descr");
+  expect_error(npy_bytes("{'descr': '<`i2', 'fortran_order': False, 'shape': (1,), }", std::string(16, '\0')),
+               "not supported");  // found by fuzz_npy: a non-numeric width
   EXPECT_THROW(read_npy(test::scratch_dir() / "missing.npy"), Error);
 }
 

@@ -1,5 +1,6 @@
 #include "d2gs/core/npy.hpp"
 
+#include <algorithm>
 #include <bit>
 #include <cstdint>
 #include <cstring>
@@ -96,7 +97,9 @@ NpyArray parse_npy(std::string_view bytes, const std::filesystem::path& src) {
   const char endian = descr[1];
   const char kind = descr[2];
   const std::string width_text = descr.substr(3, descr.size() - 4);
-  if (width_text.empty() || width_text.size() > 2) fail_file(src, "npy dtype {} is not supported", descr);
+  if (width_text.empty() || width_text.size() > 2 ||
+      !std::all_of(width_text.begin(), width_text.end(), [](char ch) { return ch >= '0' && ch <= '9'; }))
+    fail_file(src, "npy dtype {} is not supported", descr);
   const int width = std::stoi(width_text);
   const bool little_host = std::endian::native == std::endian::little;
   const bool swap = (endian == '>' && little_host) || (endian == '<' && !little_host);
