@@ -182,6 +182,10 @@ TEST(LlffBadInput, NanRowWrongShapeRowCountCorruptMagic) {
   expect_error([&] { load_scene(root, res(8)); }, {npy.string(), "truncated"});
   test::write_bytes(npy, good);
   EXPECT_NO_THROW(load_scene(root, res(8)));
+  // Hidden files (an interrupted atomic write, macOS metadata) are not images of the scene.
+  test::write_bytes(root / "images_8" / ".image000.tmp123-0.png", "partial");
+  test::write_bytes(root / "images_8" / "._image001.png", "metadata");
+  EXPECT_EQ(load_scene(root, res(8)).cameras.size(), 20u);
 }
 
 TEST(LlffBadInput, MissingAndCorruptImages) {

@@ -6,7 +6,6 @@
 #include <atomic>
 #include <cerrno>
 #include <cstring>
-#include <sstream>
 #include <system_error>
 
 #include "d2gs/core/error.hpp"
@@ -101,12 +100,14 @@ std::string read_file(const fs::path& path) {
   std::error_code ec;
   if (!fs::exists(path, ec)) fail_file(path, "file not found");
   if (fs::is_directory(path, ec)) fail_file(path, "is a folder, expected a file");
-  std::ifstream in(path, std::ios::binary);
+  std::ifstream in(path, std::ios::binary | std::ios::ate);
   if (!in) fail_file(path, "cannot open: {}", std::strerror(errno));
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  if (in.bad()) fail_file(path, "read error");
-  return std::move(ss).str();
+  const std::streamoff size = in.tellg();
+  if (size < 0) fail_file(path, "cannot determine the file size");
+  std::string bytes(static_cast<std::size_t>(size), '\0');
+  in.seekg(0);
+  if (!in.read(bytes.data(), size)) fail_file(path, "read error");
+  return bytes;
 }
 
 }  // namespace d2gs

@@ -22,12 +22,14 @@ bool is_image_file(const fs::path& p) {
   return ext == ".png" || ext == ".jpg" || ext == ".jpeg";
 }
 
-// Regular image files (png/jpg/jpeg, any case) of `dir`, sorted by file name.
+// Regular image files (png/jpg/jpeg, any case) of `dir`, sorted by file name. Hidden files (a name
+// starting with '.': interrupted atomic writes, macOS "._" metadata) are not images of the scene.
 std::vector<std::string> list_images(const fs::path& dir) {
   std::vector<std::string> names;
   std::error_code ec;
   for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec))
-    if (it->is_regular_file(ec) && is_image_file(it->path())) names.push_back(it->path().filename().string());
+    if (it->is_regular_file(ec) && is_image_file(it->path()) && !it->path().filename().string().starts_with('.'))
+      names.push_back(it->path().filename().string());
   if (ec) fail_file(dir, "cannot list folder ({})", ec.message());
   std::sort(names.begin(), names.end());
   return names;
