@@ -5,3 +5,4 @@ cd "$(dirname "$0")/.."
 ./scripts/setup.sh
 ./scripts/build.sh
 build/d2gs demo -o demo "$@"
+build/d2gs info -s demo --n-views 3
