@@ -1,0 +1,343 @@
+#include "d2gs/eval/sinkhorn.hpp"
+
+#include <omp.h>
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <type_traits>
+
+#include "d2gs/core/error.hpp"
+#include "d2gs/eval/vector_clones.hpp"
+
+namespace d2gs {
+namespace {
+
+D2GS_ALWAYS_INLINE float exp_core(float x) {
+  x = x < -86.0f ? -86.0f : x;
+  x = x > 88.0f ? 88.0f : x;
+  // x = k ln2 + r, |r| <= ln2/2; k by the 1.5·2^23 rounding trick (round to nearest).
+  const float shifted = x * 1.44269504088896341f + 12582912.0f;
+  const float kf = shifted - 12582912.0f;
+  const std::int32_t k = std::bit_cast<std::int32_t>(shifted) - 0x4B400000;
+  float r = x - kf * 0.693359375f;  // ln2 split in two parts: the first is exact in a few bits
+  r = r - kf * -2.12194440054690583e-4f;
+  // Taylor series of exp to degree 7 (truncation error < 6e-9 on |r| <= 0.347).
+  float p = 1.0f / 5040.0f;
+  p = p * r + 1.0f / 720.0f;
+  p = p * r + 1.0f / 120.0f;
+  p = p * r + 1.0f / 24.0f;
+  p = p * r + 1.0f / 6.0f;
+  p = p * r + 0.5f;
+  p = p * r + 1.0f;
+  p = p * r + 1.0f;
+  return std::bit_cast<float>(std::bit_cast<std::int32_t>(p) + static_cast<std::int32_t>(
+                                  static_cast<std::uint32_t>(k) << 23));
+}
+
+// max_j (pot_j − c_j·inv_eps)
+template <class T>
+D2GS_ALWAYS_INLINE double max_arg(const T* c, const double* pot, double inv_eps, std::size_t count) {
+  double m = -std::numeric_limits<double>::infinity();
+#pragma omp simd reduction(max : m)
+  for (std::size_t j = 0; j < count; ++j) {
+    const double v = pot[j] - static_cast<double>(c[j]) * inv_eps;
+    m = v > m ? v : m;
+  }
+  return m;
+}
+
+// log Σ_j exp(pot_j − c_j·inv_eps): the argument is formed and reduced by the maximum in double, then
+// exponentiated in float (it lies in [-86, 0] where float keeps ~1e-7 relative accuracy) and summed in
+// double. `omp simd` lets the compiler split the sum into vector lanes: the order is fixed by the compiled
+// vector width, never by the thread count.
+template <class T>
+D2GS_ALWAYS_INLINE double lse_body(const T* c, const double* pot, double inv_eps, std::size_t count) {
+  const double m = max_arg(c, pot, inv_eps, count);
+  if (!std::isfinite(m)) return m;
+  double sum = 0.0;
+#pragma omp simd reduction(+ : sum)
+  for (std::size_t j = 0; j < count; ++j)
+    sum += static_cast<double>(exp_core(static_cast<float>(pot[j] - static_cast<double>(c[j]) * inv_eps - m)));
+  return m + std::log(sum);
+}
+
+// The same with std::exp in double (SinkhornOptions::double_exp).
+template <class T>
+double lse_precise(const T* c, const double* pot, double inv_eps, std::size_t count) {
+  const double m = max_arg(c, pot, inv_eps, count);
+  if (!std::isfinite(m)) return m;
+  double sum = 0.0;
+  for (std::size_t j = 0; j < count; ++j) sum += std::exp(pot[j] - static_cast<double>(c[j]) * inv_eps - m);
+  return m + std::log(sum);
+}
+
+// Σ_j exp(shift + pot_j − c_j·inv_eps) and Σ_j of the same times c_j, i.e. a row (or column) sum of the
+// plan and its share of ⟨P, C⟩, with the row maximum taken out of the exponent for accuracy.
+template <class T>
+D2GS_ALWAYS_INLINE void plan_body(const T* c, const double* pot, double shift, double inv_eps, std::size_t count,
+                                  bool precise, double* mass, double* cost) {
+  const double m = max_arg(c, pot, inv_eps, count);
+  double sm = 0.0, sc = 0.0;
+  if (precise) {
+    for (std::size_t j = 0; j < count; ++j) {
+      const double ck = static_cast<double>(c[j]);
+      const double p = std::exp(pot[j] - ck * inv_eps - m);
+      sm += p;
+      sc += p * ck;
+    }
+  } else {
+#pragma omp simd reduction(+ : sm, sc)
+    for (std::size_t j = 0; j < count; ++j) {
+      const double ck = static_cast<double>(c[j]);
+      const double p = static_cast<double>(exp_core(static_cast<float>(pot[j] - ck * inv_eps - m)));
+      sm += p;
+      sc += p * ck;
+    }
+  }
+  const double scale = std::isfinite(m) ? std::exp(shift + m) : 0.0;
+  *mass = scale * sm;
+  *cost = scale * sc;
+}
+
+D2GS_VECTOR_CLONES double lse_f32(const float* c, const double* pot, double inv_eps, std::size_t count) {
+  return lse_body(c, pot, inv_eps, count);
+}
+D2GS_VECTOR_CLONES double lse_f64(const double* c, const double* pot, double inv_eps, std::size_t count) {
+  return lse_body(c, pot, inv_eps, count);
+}
+D2GS_VECTOR_CLONES void plan_f32(const float* c, const double* pot, double shift, double inv_eps, std::size_t count,
+                                 bool precise, double* mass, double* cost) {
+  plan_body(c, pot, shift, inv_eps, count, precise, mass, cost);
+}
+D2GS_VECTOR_CLONES void plan_f64(const double* c, const double* pot, double shift, double inv_eps, std::size_t count,
+                                 bool precise, double* mass, double* cost) {
+  plan_body(c, pot, shift, inv_eps, count, precise, mass, cost);
+}
+
+double lse(CostSpan span, const double* pot, double inv_eps, std::size_t count, bool precise) {
+  if (precise)
+    return span.f32 ? lse_precise(span.f32, pot, inv_eps, count) : lse_precise(span.f64, pot, inv_eps, count);
+  return span.f32 ? lse_f32(span.f32, pot, inv_eps, count) : lse_f64(span.f64, pot, inv_eps, count);
+}
+void plan(CostSpan span, const double* pot, double shift, double inv_eps, std::size_t count, bool precise,
+          double* mass, double* cost) {
+  if (span.f32)
+    plan_f32(span.f32, pot, shift, inv_eps, count, precise, mass, cost);
+  else
+    plan_f64(span.f64, pot, shift, inv_eps, count, precise, mass, cost);
+}
+
+// One scratch row per thread, sized for either orientation.
+struct Scratch {
+  std::vector<std::vector<double>> buffers;
+  Scratch(int threads, std::size_t size) : buffers(static_cast<std::size_t>(threads), std::vector<double>(size)) {}
+  double* get() { return buffers[static_cast<std::size_t>(omp_get_thread_num())].data(); }
+};
+
+}  // namespace
+
+namespace sinkhorn_detail {
+float fast_exp(float x) { return exp_core(x); }
+double log_sum_exp(const float* c, const double* pot, double inv_eps, std::size_t count) {
+  return lse_f32(c, pot, inv_eps, count);
+}
+double log_sum_exp(const double* c, const double* pot, double inv_eps, std::size_t count) {
+  return lse_f64(c, pot, inv_eps, count);
+}
+}  // namespace sinkhorn_detail
+
+// ---- stored cost ----
+
+template <class T>
+DenseCostMatrix<T>::DenseCostMatrix(std::size_t n, std::size_t m, std::vector<T> row_major)
+    : n_(n), m_(m), by_row_(std::move(row_major)) {
+  if (by_row_.size() != n * m) fail("cost matrix: {} values for a {} x {} matrix", by_row_.size(), n, m);
+  by_col_.resize(n * m);
+  constexpr std::size_t kBlock = 64;
+  const auto blocks = static_cast<std::int64_t>((m + kBlock - 1) / kBlock);
+#pragma omp parallel for schedule(static)
+  for (std::int64_t bj = 0; bj < blocks; ++bj) {
+    const std::size_t j0 = static_cast<std::size_t>(bj) * kBlock, j1 = std::min(m, j0 + kBlock);
+    for (std::size_t i0 = 0; i0 < n; i0 += kBlock) {
+      const std::size_t i1 = std::min(n, i0 + kBlock);
+      for (std::size_t j = j0; j < j1; ++j)
+        for (std::size_t i = i0; i < i1; ++i) by_col_[j * n + i] = by_row_[i * m + j];
+    }
+  }
+}
+
+template <class T>
+CostSpan DenseCostMatrix<T>::row(std::size_t i, double*) const {
+  CostSpan s;
+  if constexpr (std::is_same_v<T, float>) s.f32 = by_row_.data() + i * m_;
+  else s.f64 = by_row_.data() + i * m_;
+  return s;
+}
+
+template <class T>
+CostSpan DenseCostMatrix<T>::column(std::size_t j, double*) const {
+  CostSpan s;
+  if constexpr (std::is_same_v<T, float>) s.f32 = by_col_.data() + j * n_;
+  else s.f64 = by_col_.data() + j * n_;
+  return s;
+}
+
+template <class T>
+DenseCostMatrix<T> store_cost(const CostMatrix& cost) {
+  const std::size_t n = cost.rows(), m = cost.cols();
+  std::vector<T> values(n * m);
+  Scratch scratch(omp_get_max_threads(), std::max(n, m));
+#pragma omp parallel for schedule(dynamic, 16)
+  for (std::int64_t si = 0; si < static_cast<std::int64_t>(n); ++si) {
+    const auto i = static_cast<std::size_t>(si);
+    const CostSpan s = cost.row(i, scratch.get());
+    T* out = values.data() + i * m;
+    if (s.f32)
+      for (std::size_t j = 0; j < m; ++j) out[j] = static_cast<T>(s.f32[j]);
+    else
+      for (std::size_t j = 0; j < m; ++j) out[j] = static_cast<T>(s.f64[j]);
+  }
+  return DenseCostMatrix<T>(n, m, std::move(values));
+}
+
+template class DenseCostMatrix<float>;
+template class DenseCostMatrix<double>;
+template DenseCostMatrix<float> store_cost<float>(const CostMatrix&);
+template DenseCostMatrix<double> store_cost<double>(const CostMatrix&);
+
+// ---- the solver ----
+
+namespace {
+double max_cost_entry(const CostMatrix& cost, int threads) {
+  const std::size_t n = cost.rows(), m = cost.cols();
+  std::vector<double> row_max(n, 0.0);
+  Scratch scratch(threads, std::max(n, m));
+#pragma omp parallel for schedule(dynamic, 16) num_threads(threads)
+  for (std::int64_t si = 0; si < static_cast<std::int64_t>(n); ++si) {
+    const auto i = static_cast<std::size_t>(si);
+    const CostSpan s = cost.row(i, scratch.get());
+    double mx = 0.0;
+    for (std::size_t j = 0; j < m; ++j) mx = std::max(mx, s.f32 ? static_cast<double>(s.f32[j]) : s.f64[j]);
+    row_max[i] = mx;
+  }
+  double mx = 0.0;
+  for (const double v : row_max) mx = std::max(mx, v);
+  return mx;
+}
+}  // namespace
+
+SinkhornResult sinkhorn(std::span<const double> a, std::span<const double> b, const CostMatrix& cost,
+                        const SinkhornOptions& options) {
+  const std::size_t n = cost.rows(), m = cost.cols();
+  if (a.size() != n || b.size() != m)
+    fail("sinkhorn: weights have {} and {} entries for a {} x {} cost", a.size(), b.size(), n, m);
+  if (n == 0 || m == 0) fail("sinkhorn: empty problem ({} x {})", n, m);
+  if (!(options.epsilon > 0.0)) fail("sinkhorn: epsilon must be positive, got {}", options.epsilon);
+  if (!(options.tolerance >= 0.0)) fail("sinkhorn: tolerance must be non-negative, got {}", options.tolerance);
+  if (options.max_iterations < 1) fail("sinkhorn: max iterations must be at least 1, got {}", options.max_iterations);
+  std::vector<double> log_a(n), log_b(m);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!(a[i] > 0.0) || !std::isfinite(a[i])) fail("sinkhorn: weight a[{}] = {} is not positive", i, a[i]);
+    log_a[i] = std::log(a[i]);
+  }
+  for (std::size_t j = 0; j < m; ++j) {
+    if (!(b[j] > 0.0) || !std::isfinite(b[j])) fail("sinkhorn: weight b[{}] = {} is not positive", j, b[j]);
+    log_b[j] = std::log(b[j]);
+  }
+  const int threads =
+      options.threads > 0
+          ? options.threads
+          : static_cast<int>(std::clamp<std::size_t>(n * m >> 18, 1, static_cast<std::size_t>(omp_get_max_threads())));
+  const bool precise = options.double_exp;
+
+  // ε schedule
+  std::vector<double> epsilons;
+  if (options.epsilon_scaling) {
+    if (!(options.epsilon_factor > 0.0 && options.epsilon_factor < 1.0))
+      fail("sinkhorn: epsilon factor must be in (0, 1), got {}", options.epsilon_factor);
+    double e = options.epsilon_start > 0.0 ? options.epsilon_start : max_cost_entry(cost, threads);
+    for (; e > options.epsilon * (1.0 + 1e-9); e *= options.epsilon_factor) epsilons.push_back(e);
+  }
+  epsilons.push_back(options.epsilon);
+
+  SinkhornResult result;
+  std::vector<double> phi(n, 0.0), psi(m, 0.0), dphi(n, 0.0), dpsi(m, 0.0);
+  Scratch scratch(threads, std::max(n, m));
+  double eps_prev = epsilons.front();
+  for (const double eps : epsilons) {
+    const double inv_eps = 1.0 / eps;
+    const double tolerance =
+        eps == epsilons.back() ? options.tolerance : std::max(options.tolerance, options.stage_tolerance);
+    const double rescale = eps_prev / eps;  // keep f = εφ, g = εψ across stages
+    for (auto& v : phi) v *= rescale;
+    for (auto& v : psi) v *= rescale;
+    eps_prev = eps;
+    result.converged = false;
+    while (result.iterations < options.max_iterations) {
+#pragma omp parallel num_threads(threads)
+      {
+#pragma omp for schedule(dynamic, 16)
+        for (std::int64_t si = 0; si < static_cast<std::int64_t>(n); ++si) {
+          const auto i = static_cast<std::size_t>(si);
+          const double updated = log_a[i] - lse(cost.row(i, scratch.get()), psi.data(), inv_eps, m, precise);
+          dphi[i] = std::abs(updated - phi[i]);
+          phi[i] = updated;
+        }
+#pragma omp for schedule(dynamic, 16)
+        for (std::int64_t sj = 0; sj < static_cast<std::int64_t>(m); ++sj) {
+          const auto j = static_cast<std::size_t>(sj);
+          const double updated = log_b[j] - lse(cost.column(j, scratch.get()), phi.data(), inv_eps, n, precise);
+          dpsi[j] = std::abs(updated - psi[j]);
+          psi[j] = updated;
+        }
+      }
+      ++result.iterations;
+      double change = 0.0;
+      for (const double d : dphi) change = std::max(change, d);
+      for (const double d : dpsi) change = std::max(change, d);
+      if (!std::isfinite(change)) fail("sinkhorn: the potentials diverged (non-finite values) at iteration {}", result.iterations);
+      result.last_change = change;
+      if (change < tolerance) {
+        result.converged = true;
+        break;
+      }
+    }
+    if (!result.converged) break;  // out of iterations: later stages are not run
+  }
+  result.epsilon = eps_prev;
+
+  // Plan marginals and transport cost with the final potentials.
+  const double inv_eps = 1.0 / eps_prev;
+  std::vector<double> row_mass(n), row_cost(n), col_mass(m), col_cost(m);
+#pragma omp parallel num_threads(threads)
+  {
+#pragma omp for schedule(dynamic, 16)
+    for (std::int64_t si = 0; si < static_cast<std::int64_t>(n); ++si) {
+      const auto i = static_cast<std::size_t>(si);
+      plan(cost.row(i, scratch.get()), psi.data(), phi[i], inv_eps, m, precise, &row_mass[i], &row_cost[i]);
+    }
+#pragma omp for schedule(dynamic, 16)
+    for (std::int64_t sj = 0; sj < static_cast<std::int64_t>(m); ++sj) {
+      const auto j = static_cast<std::size_t>(sj);
+      plan(cost.column(j, scratch.get()), phi.data(), psi[j], inv_eps, n, precise, &col_mass[j], &col_cost[j]);
+    }
+  }
+  double total = 0.0, error = 0.0;
+  for (std::size_t i = 0; i < n; ++i) {
+    total += row_cost[i];
+    error += std::abs(row_mass[i] - a[i]);
+  }
+  for (std::size_t j = 0; j < m; ++j) error += std::abs(col_mass[j] - b[j]);
+  result.transport_cost = total;
+  result.marginal_error = error;
+  result.f.resize(n);
+  result.g.resize(m);
+  for (std::size_t i = 0; i < n; ++i) result.f[i] = eps_prev * phi[i];
+  for (std::size_t j = 0; j < m; ++j) result.g[j] = eps_prev * psi[j];
+  return result;
+}
+
+}  // namespace d2gs

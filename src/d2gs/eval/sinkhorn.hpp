@@ -1,0 +1,114 @@
+#pragma once
+// Entropic optimal transport by log-domain Sinkhorn (method.md §7 step 4).
+//
+// Problem: for weights a (n, Σa = 1), b (m, Σb = 1) and a cost C (n × m), find the plan
+//   P = argmin_{P 1 = a, Pᵀ 1 = b} ⟨P, C⟩ − ε H(P),  H(P) = −Σ P_ij (log P_ij − 1),
+// whose solution is P_ij = exp((f_i + g_j − C_ij)/ε). This is the same problem as POT's
+// ot.sinkhorn(a, b, M, reg) with reg = ε. The iteration, in the dimensionless log-potentials
+// φ = f/ε, ψ = g/ε (each update a log-sum-exp in double after subtracting the running maximum):
+//   φ_i ← log a_i − log Σ_j exp(ψ_j − C_ij/ε)      (then)      ψ_j ← log b_j − log Σ_i exp(φ_i − C_ij/ε)
+// Stopping rule: max(max_i |Δφ_i|, max_j |Δψ_j|) over one full iteration < tolerance (the change of the
+// log-potentials); the final L1 marginal error Σ_i |P1 − a|_i + Σ_j |Pᵀ1 − b|_j is reported. After the last
+// ψ update the column marginals are exact up to rounding, so the error is essentially the row part.
+// The result is the transport cost ⟨P, C⟩ (no entropy term): what ot.sinkhorn2 returns.
+//
+// Parallelism: OpenMP over rows (φ update) and over columns (ψ update); every row/column is reduced by one
+// thread in a fixed order, and all cross-row sums are done serially afterwards, so results are bitwise
+// independent of the thread count. Exponentials use a vectorisable float exp (relative error ~1e-7) of
+// arguments already reduced in double, accumulated in double.
+#include <cstddef>
+#include <span>
+#include <vector>
+
+namespace d2gs {
+
+// One row or column of a cost matrix: exactly one of the pointers is set.
+struct CostSpan {
+  const float* f32 = nullptr;
+  const double* f64 = nullptr;
+};
+
+// A cost matrix as the solver reads it: a whole row or a whole column at a time, from any thread.
+class CostMatrix {
+public:
+  virtual ~CostMatrix() = default;
+  virtual std::size_t rows() const = 0;
+  virtual std::size_t cols() const = 0;
+  // Row i (cols() values) or column j (rows() values): a pointer into stored data, or into `scratch` (room
+  // for max(rows(), cols()) doubles, owned by the calling thread) after filling it with the values.
+  virtual CostSpan row(std::size_t i, double* scratch) const = 0;
+  virtual CostSpan column(std::size_t j, double* scratch) const = 0;
+};
+
+// A stored cost matrix, kept in both row-major and column-major order (2 · n · m · sizeof(T) bytes) so
+// both half-iterations read contiguous memory.
+template <class T>
+class DenseCostMatrix final : public CostMatrix {
+public:
+  DenseCostMatrix() = default;
+  // `row_major` holds n · m values, C_ij at i · m + j.
+  DenseCostMatrix(std::size_t n, std::size_t m, std::vector<T> row_major);
+  std::size_t rows() const override { return n_; }
+  std::size_t cols() const override { return m_; }
+  CostSpan row(std::size_t i, double* scratch) const override;
+  CostSpan column(std::size_t j, double* scratch) const override;
+  const std::vector<T>& row_major() const { return by_row_; }
+
+private:
+  std::size_t n_ = 0, m_ = 0;
+  std::vector<T> by_row_, by_col_;
+};
+
+// Evaluates every entry of `cost` once (rows in parallel) and stores it.
+template <class T>
+DenseCostMatrix<T> store_cost(const CostMatrix& cost);
+
+struct SinkhornOptions {
+  double epsilon = 0.1;         // ε, in the cost's units (POT's reg)
+  int max_iterations = 10000;   // one iteration = one φ update + one ψ update (all ε stages together)
+  double tolerance = 1e-4;      // on max |Δφ|, |Δψ| (log-potentials, dimensionless) over one iteration
+  // ε-scaling: solve first with ε_start, then ε_start·factor, ... down to ε, warm-starting the potentials
+  // (kept in cost units f = εφ, g = εψ across stages). Intermediate stages stop at
+  // max(tolerance, stage_tolerance); the last one at `tolerance`.
+  bool epsilon_scaling = false;
+  double epsilon_start = 0.0;   // 0: max_ij C_ij (one extra pass over the cost)
+  double epsilon_factor = 0.5;
+  double stage_tolerance = 1e-2;
+  // 0: OpenMP's default, reduced for small problems (one thread per 2^18 cost entries) because two
+  // barriers per iteration cost more than they save there, above all on a busy machine. Results do not
+  // depend on the thread count.
+  int threads = 0;
+  // Exponentials by std::exp in double instead of the vectorised float exp. The float exp makes each
+  // log-sum-exp accurate to ~1e-7, so the potentials stop changing only down to ~1e-6: tolerances below
+  // that need double_exp (several times slower; used for cross-checks).
+  bool double_exp = false;
+};
+
+struct SinkhornResult {
+  double transport_cost = 0.0;  // ⟨P, C⟩
+  double marginal_error = 0.0;  // L1, rows + columns
+  double last_change = 0.0;     // max |Δφ|, |Δψ| of the last iteration
+  int iterations = 0;           // over all ε stages
+  bool converged = false;       // last stage reached `tolerance` within `max_iterations`
+  double epsilon = 0.0;         // the final ε
+  std::vector<double> f, g;     // dual potentials in cost units (f = εφ, g = εψ)
+};
+
+// Solves the problem above. a and b must be positive (zero-mass components are not supported: drop them)
+// and of sizes cost.rows(), cost.cols(); their sums should agree (each is used as given).
+SinkhornResult sinkhorn(std::span<const double> a, std::span<const double> b, const CostMatrix& cost,
+                        const SinkhornOptions& options = {});
+
+// The debiased divergence of three transport costs: S(A,B) − ½ S(A,A) − ½ S(B,B).
+inline double debiased_divergence(double s_ab, double s_aa, double s_bb) { return s_ab - 0.5 * (s_aa + s_bb); }
+
+// Kernels, exposed for tests and benchmarks.
+namespace sinkhorn_detail {
+// Vectorisable exp of a float argument; valid for any x (clamped to [-86, 88]), relative error ~2e-7.
+float fast_exp(float x);
+// log Σ_j exp(pot_j − c_j · inv_eps), in double with the maximum subtracted first.
+double log_sum_exp(const float* c, const double* pot, double inv_eps, std::size_t count);
+double log_sum_exp(const double* c, const double* pot, double inv_eps, std::size_t count);
+}  // namespace sinkhorn_detail
+
+}  // namespace d2gs

@@ -1,0 +1,242 @@
+// Log-domain Sinkhorn: kernels, agreement with a plain double reference, determinism, options.
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <random>
+
+#include <gtest/gtest.h>
+
+#include "d2gs/core/error.hpp"
+#include "d2gs/eval/sinkhorn.hpp"
+
+namespace d2gs {
+namespace {
+
+struct Problem {
+  std::size_t n = 0, m = 0;
+  std::vector<double> a, b, c;  // c row-major
+};
+
+Problem random_problem(std::size_t n, std::size_t m, unsigned seed) {
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  Problem p;
+  p.n = n, p.m = m;
+  std::vector<double> xa(n * 2), xb(m * 2);
+  for (auto& v : xa) v = u(rng);
+  for (auto& v : xb) v = u(rng) + 0.2;
+  for (std::size_t i = 0; i < n; ++i) p.a.push_back(0.2 + u(rng));
+  for (std::size_t j = 0; j < m; ++j) p.b.push_back(0.2 + u(rng));
+  const double sa = std::accumulate(p.a.begin(), p.a.end(), 0.0), sb = std::accumulate(p.b.begin(), p.b.end(), 0.0);
+  for (auto& v : p.a) v /= sa;
+  for (auto& v : p.b) v /= sb;
+  for (std::size_t i = 0; i < n; ++i)
+    for (std::size_t j = 0; j < m; ++j) {
+      const double dx = xa[2 * i] - xb[2 * j], dy = xa[2 * i + 1] - xb[2 * j + 1];
+      p.c.push_back(dx * dx + dy * dy);
+    }
+  return p;
+}
+
+// Plain log-domain Sinkhorn in double with std::exp: the obviously-correct reference.
+double reference_transport(const Problem& p, double eps, int iterations) {
+  std::vector<double> f(p.n, 0.0), g(p.m, 0.0);
+  const auto lse = [](const std::vector<double>& v) {
+    const double mx = *std::max_element(v.begin(), v.end());
+    double s = 0;
+    for (const double x : v) s += std::exp(x - mx);
+    return mx + std::log(s);
+  };
+  std::vector<double> row(p.m), col(p.n);
+  for (int it = 0; it < iterations; ++it) {
+    for (std::size_t i = 0; i < p.n; ++i) {
+      for (std::size_t j = 0; j < p.m; ++j) row[j] = (g[j] - p.c[i * p.m + j]) / eps;
+      f[i] = eps * (std::log(p.a[i]) - lse(row));
+    }
+    for (std::size_t j = 0; j < p.m; ++j) {
+      for (std::size_t i = 0; i < p.n; ++i) col[i] = (f[i] - p.c[i * p.m + j]) / eps;
+      g[j] = eps * (std::log(p.b[j]) - lse(col));
+    }
+  }
+  double total = 0;
+  for (std::size_t i = 0; i < p.n; ++i)
+    for (std::size_t j = 0; j < p.m; ++j) {
+      const double c = p.c[i * p.m + j];
+      total += std::exp((f[i] + g[j] - c) / eps) * c;
+    }
+  return total;
+}
+
+std::vector<float> to_float(const std::vector<double>& v) { return std::vector<float>(v.begin(), v.end()); }
+
+// A cost computed on the fly from a stored double matrix (exercises the scratch path).
+class ComputedCost final : public CostMatrix {
+public:
+  explicit ComputedCost(const Problem& p) : p_(p) {}
+  std::size_t rows() const override { return p_.n; }
+  std::size_t cols() const override { return p_.m; }
+  CostSpan row(std::size_t i, double* scratch) const override {
+    std::copy_n(p_.c.begin() + static_cast<std::ptrdiff_t>(i * p_.m), p_.m, scratch);
+    return {nullptr, scratch};
+  }
+  CostSpan column(std::size_t j, double* scratch) const override {
+    for (std::size_t i = 0; i < p_.n; ++i) scratch[i] = p_.c[i * p_.m + j];
+    return {nullptr, scratch};
+  }
+
+private:
+  const Problem& p_;
+};
+
+TEST(Sinkhorn, FastExpAccuracy) {
+  double worst = 0;
+  for (double x = -86.0; x <= 0.0; x += 0.001) {
+    const float xf = static_cast<float>(x);
+    const double exact = std::exp(static_cast<double>(xf));
+    worst = std::max(worst, std::abs(sinkhorn_detail::fast_exp(xf) - exact) / exact);
+  }
+  EXPECT_LT(worst, 3e-7);
+  EXPECT_GT(sinkhorn_detail::fast_exp(-1000.0f), 0.0f);  // clamped, never 0 or denormal garbage
+  EXPECT_LT(sinkhorn_detail::fast_exp(-1000.0f), 1e-37f);
+  EXPECT_TRUE(std::isfinite(sinkhorn_detail::fast_exp(1000.0f)));
+}
+
+TEST(Sinkhorn, LogSumExpMatchesDouble) {
+  std::mt19937 rng(1);
+  std::uniform_real_distribution<double> u(0, 50);
+  for (const std::size_t count : {1u, 7u, 16u, 33u, 1000u}) {
+    std::vector<double> c(count), pot(count);
+    for (auto& v : c) v = u(rng);
+    for (auto& v : pot) v = u(rng) - 25;
+    const double inv_eps = 0.37;
+    double mx = -1e300;
+    for (std::size_t j = 0; j < count; ++j) mx = std::max(mx, pot[j] - c[j] * inv_eps);
+    double s = 0;
+    for (std::size_t j = 0; j < count; ++j) s += std::exp(pot[j] - c[j] * inv_eps - mx);
+    EXPECT_NEAR(sinkhorn_detail::log_sum_exp(c.data(), pot.data(), inv_eps, count), mx + std::log(s), 1e-6);
+  }
+}
+
+TEST(Sinkhorn, MatchesPlainReference) {
+  const Problem p = random_problem(37, 53, 11);
+  const DenseCostMatrix<double> cost(p.n, p.m, p.c);
+  for (const double eps : {1.0, 0.1, 0.02}) {
+    SinkhornOptions o;
+    o.epsilon = eps;
+    o.tolerance = 1e-11;
+    o.max_iterations = 100000;
+    o.double_exp = true;
+    const SinkhornResult r = sinkhorn(p.a, p.b, cost, o);
+    EXPECT_TRUE(r.converged);
+    const double ref = reference_transport(p, eps, r.iterations + 50);
+    EXPECT_NEAR(r.transport_cost, ref, 1e-10 * ref) << "eps " << eps;
+    EXPECT_LT(r.marginal_error, 1e-9);
+    // The vectorised float exp: potentials settle to ~1e-6.
+    o.double_exp = false;
+    o.tolerance = 1e-6;
+    const SinkhornResult fast = sinkhorn(p.a, p.b, cost, o);
+    EXPECT_TRUE(fast.converged);
+    EXPECT_NEAR(fast.transport_cost, ref, 1e-6 * ref) << "eps " << eps;
+    EXPECT_LT(fast.marginal_error, 1e-5);
+  }
+}
+
+TEST(Sinkhorn, StorageVariantsAgree) {
+  const Problem p = random_problem(301, 257, 5);
+  SinkhornOptions o;
+  o.tolerance = 1e-6;
+  const SinkhornResult d = sinkhorn(p.a, p.b, DenseCostMatrix<double>(p.n, p.m, p.c), o);
+  const SinkhornResult f = sinkhorn(p.a, p.b, DenseCostMatrix<float>(p.n, p.m, to_float(p.c)), o);
+  const ComputedCost computed(p);
+  const SinkhornResult c = sinkhorn(p.a, p.b, computed, o);
+  const SinkhornResult s = sinkhorn(p.a, p.b, store_cost<float>(computed), o);
+  EXPECT_DOUBLE_EQ(c.transport_cost, d.transport_cost);  // same values, same kernels
+  EXPECT_NEAR(f.transport_cost, d.transport_cost, 1e-6 * d.transport_cost);
+  EXPECT_DOUBLE_EQ(s.transport_cost, f.transport_cost);
+}
+
+TEST(Sinkhorn, DeterministicAcrossThreadCounts) {
+  const Problem p = random_problem(401, 333, 9);
+  const DenseCostMatrix<float> cost(p.n, p.m, to_float(p.c));
+  SinkhornOptions o;
+  o.threads = 1;
+  const SinkhornResult one = sinkhorn(p.a, p.b, cost, o);
+  for (const int threads : {2, 3, 7}) {
+    o.threads = threads;
+    const SinkhornResult other = sinkhorn(p.a, p.b, cost, o);
+    EXPECT_EQ(other.transport_cost, one.transport_cost) << threads;  // bitwise
+    EXPECT_EQ(other.marginal_error, one.marginal_error);
+    EXPECT_EQ(other.iterations, one.iterations);
+    EXPECT_EQ(other.f, one.f);
+    EXPECT_EQ(other.g, one.g);
+  }
+}
+
+TEST(Sinkhorn, SymmetryUnderTranspositionAndPermutation) {
+  const Problem p = random_problem(120, 90, 21);
+  SinkhornOptions o;
+  o.tolerance = 1e-10;
+  o.double_exp = true;
+  const SinkhornResult r = sinkhorn(p.a, p.b, DenseCostMatrix<double>(p.n, p.m, p.c), o);
+  // Transposed problem: same plan transposed, same cost.
+  std::vector<double> ct(p.n * p.m);
+  for (std::size_t i = 0; i < p.n; ++i)
+    for (std::size_t j = 0; j < p.m; ++j) ct[j * p.n + i] = p.c[i * p.m + j];
+  const SinkhornResult t = sinkhorn(p.b, p.a, DenseCostMatrix<double>(p.m, p.n, ct), o);
+  EXPECT_NEAR(t.transport_cost, r.transport_cost, 1e-9 * r.transport_cost);
+  // Reversed row order: same cost.
+  std::vector<double> a_rev(p.a.rbegin(), p.a.rend()), c_rev(p.n * p.m);
+  for (std::size_t i = 0; i < p.n; ++i)
+    for (std::size_t j = 0; j < p.m; ++j) c_rev[(p.n - 1 - i) * p.m + j] = p.c[i * p.m + j];
+  const SinkhornResult rev = sinkhorn(a_rev, p.b, DenseCostMatrix<double>(p.n, p.m, c_rev), o);
+  EXPECT_NEAR(rev.transport_cost, r.transport_cost, 1e-9 * r.transport_cost);
+}
+
+TEST(Sinkhorn, EpsilonScalingReachesTheSameSolution) {
+  const Problem p = random_problem(150, 150, 4);
+  const DenseCostMatrix<double> cost(p.n, p.m, p.c);
+  SinkhornOptions o;
+  o.epsilon = 0.002;
+  o.tolerance = 1e-6;
+  o.max_iterations = 200000;
+  const SinkhornResult plain = sinkhorn(p.a, p.b, cost, o);
+  o.epsilon_scaling = true;
+  const SinkhornResult scaled = sinkhorn(p.a, p.b, cost, o);
+  EXPECT_TRUE(plain.converged);
+  EXPECT_TRUE(scaled.converged);
+  EXPECT_DOUBLE_EQ(scaled.epsilon, 0.002);
+  EXPECT_NEAR(scaled.transport_cost, plain.transport_cost, 1e-5 * plain.transport_cost);
+  EXPECT_LT(scaled.iterations, plain.iterations);
+}
+
+TEST(Sinkhorn, StopsAtMaxIterationsAndReportsIt) {
+  const Problem p = random_problem(60, 60, 2);
+  SinkhornOptions o;
+  o.epsilon = 0.001;
+  o.max_iterations = 3;
+  const SinkhornResult r = sinkhorn(p.a, p.b, DenseCostMatrix<double>(p.n, p.m, p.c), o);
+  EXPECT_FALSE(r.converged);
+  EXPECT_EQ(r.iterations, 3);
+  EXPECT_GT(r.marginal_error, 1e-6);
+  EXPECT_GT(r.last_change, o.tolerance);
+}
+
+TEST(Sinkhorn, RejectsBadInput) {
+  const Problem p = random_problem(4, 5, 1);
+  const DenseCostMatrix<double> cost(p.n, p.m, p.c);
+  SinkhornOptions o;
+  EXPECT_THROW(sinkhorn(p.b, p.a, cost, o), Error);
+  std::vector<double> zero = p.a;
+  zero[0] = 0;
+  EXPECT_THROW(sinkhorn(zero, p.b, cost, o), Error);
+  o.epsilon = 0;
+  EXPECT_THROW(sinkhorn(p.a, p.b, cost, o), Error);
+  EXPECT_THROW(DenseCostMatrix<double>(3, 3, std::vector<double>(8)), Error);
+}
+
+TEST(Sinkhorn, DebiasedDivergenceArithmetic) { EXPECT_DOUBLE_EQ(debiased_divergence(5, 2, 4), 2); }
+
+}  // namespace
+}  // namespace d2gs
