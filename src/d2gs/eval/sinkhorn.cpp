@@ -6,6 +6,7 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <type_traits>
 
@@ -37,31 +38,119 @@ D2GS_ALWAYS_INLINE float exp_core(float x) {
                                   static_cast<std::uint32_t>(k) << 23));
 }
 
+// The vector helpers below are always inlined, never called across an ABI boundary.
+#pragma GCC diagnostic ignored "-Wpsabi"
+
+// Explicit 8-lane vectors (GCC/Clang vector extensions): each target clone compiles them to its native
+// width (2 x SSE, 1 x AVX-512, ...), and the summation order (8 lane partial sums, then lanes 0..7, then
+// the tail) is fixed by the source, so all clones and all thread counts give the same bits.
+typedef double v8d __attribute__((vector_size(64)));
+typedef float v8f __attribute__((vector_size(32)));
+typedef std::int32_t v8i __attribute__((vector_size(32)));
+constexpr std::size_t kLanes = 8;
+
+template <class T>
+D2GS_ALWAYS_INLINE v8d load8(const T* p) {
+  if constexpr (std::is_same_v<T, double>) {
+    v8d v;
+    std::memcpy(&v, p, sizeof v);
+    return v;
+  } else {
+    v8f v;
+    std::memcpy(&v, p, sizeof v);
+    return __builtin_convertvector(v, v8d);
+  }
+}
+
+D2GS_ALWAYS_INLINE v8f exp8(v8f x) {
+  x = x < -86.0f ? v8f{} - 86.0f : x;
+  x = x > 88.0f ? v8f{} + 88.0f : x;
+  const v8f shifted = x * 1.44269504088896341f + 12582912.0f;
+  const v8f kf = shifted - 12582912.0f;
+  v8i k;
+  std::memcpy(&k, &shifted, sizeof k);
+  k -= 0x4B400000;
+  v8f r = x - kf * 0.693359375f;
+  r = r - kf * -2.12194440054690583e-4f;
+  v8f p = v8f{} + 1.0f / 5040.0f;
+  p = p * r + 1.0f / 720.0f;
+  p = p * r + 1.0f / 120.0f;
+  p = p * r + 1.0f / 24.0f;
+  p = p * r + 1.0f / 6.0f;
+  p = p * r + 0.5f;
+  p = p * r + 1.0f;
+  p = p * r + 1.0f;
+  v8i bits;
+  std::memcpy(&bits, &p, sizeof bits);
+  bits += k << 23;
+  v8f out;
+  std::memcpy(&out, &bits, sizeof out);
+  return out;
+}
+
+D2GS_ALWAYS_INLINE double hsum(v8d v) {
+  double s = 0.0;
+  for (std::size_t k = 0; k < kLanes; ++k) s += v[k];
+  return s;
+}
+
 // max_j (pot_j − c_j·inv_eps)
 template <class T>
 D2GS_ALWAYS_INLINE double max_arg(const T* c, const double* pot, double inv_eps, std::size_t count) {
-  double m = -std::numeric_limits<double>::infinity();
-#pragma omp simd reduction(max : m)
-  for (std::size_t j = 0; j < count; ++j) {
-    const double v = pot[j] - static_cast<double>(c[j]) * inv_eps;
-    m = v > m ? v : m;
+  constexpr double kNegInf = -std::numeric_limits<double>::infinity();
+  v8d lanes = v8d{} + kNegInf;
+  std::size_t j = 0;
+  for (; j + kLanes <= count; j += kLanes) {
+    const v8d v = load8(pot + j) - load8(c + j) * inv_eps;
+    lanes = v > lanes ? v : lanes;
   }
+  double m = kNegInf;
+  for (std::size_t k = 0; k < kLanes; ++k) m = std::max(m, lanes[k]);
+  for (; j < count; ++j) m = std::max(m, pot[j] - static_cast<double>(c[j]) * inv_eps);
   return m;
 }
 
 // log Σ_j exp(pot_j − c_j·inv_eps): the argument is formed and reduced by the maximum in double, then
 // exponentiated in float (it lies in [-86, 0] where float keeps ~1e-7 relative accuracy) and summed in
-// double. `omp simd` lets the compiler split the sum into vector lanes: the order is fixed by the compiled
-// vector width, never by the thread count.
+// double.
 template <class T>
 D2GS_ALWAYS_INLINE double lse_body(const T* c, const double* pot, double inv_eps, std::size_t count) {
   const double m = max_arg(c, pot, inv_eps, count);
   if (!std::isfinite(m)) return m;
-  double sum = 0.0;
-#pragma omp simd reduction(+ : sum)
-  for (std::size_t j = 0; j < count; ++j)
+  v8d acc{};
+  std::size_t j = 0;
+  for (; j + kLanes <= count; j += kLanes) {
+    const v8d v = load8(pot + j) - load8(c + j) * inv_eps - m;
+    acc += __builtin_convertvector(exp8(__builtin_convertvector(v, v8f)), v8d);
+  }
+  double sum = hsum(acc);
+  for (; j < count; ++j)
     sum += static_cast<double>(exp_core(static_cast<float>(pot[j] - static_cast<double>(c[j]) * inv_eps - m)));
   return m + std::log(sum);
+}
+
+// One pass instead of two: the same log-sum-exp with a guessed shift instead of the maximum (the
+// previous iteration's value, which is close to the new one once the iteration settles). Returns NaN
+// when the guess was poor (largest argument outside [-20, 20]) so the caller falls back to lse_body.
+template <class T>
+D2GS_ALWAYS_INLINE double lse_guess_body(const T* c, const double* pot, double inv_eps, std::size_t count,
+                                         double guess) {
+  v8d acc{}, top = v8d{} - std::numeric_limits<double>::infinity();
+  std::size_t j = 0;
+  for (; j + kLanes <= count; j += kLanes) {
+    const v8d v = load8(pot + j) - load8(c + j) * inv_eps - guess;
+    top = v > top ? v : top;
+    acc += __builtin_convertvector(exp8(__builtin_convertvector(v, v8f)), v8d);
+  }
+  double sum = hsum(acc), mx = -std::numeric_limits<double>::infinity();
+  for (std::size_t k = 0; k < kLanes; ++k) mx = std::max(mx, top[k]);
+  for (; j < count; ++j) {
+    const double v = pot[j] - static_cast<double>(c[j]) * inv_eps - guess;
+    mx = std::max(mx, v);
+    sum += static_cast<double>(exp_core(static_cast<float>(v)));
+  }
+  if (!(mx >= -20.0 && mx <= 20.0)) return std::numeric_limits<double>::quiet_NaN();
+  return guess + std::log(sum);
 }
 
 // The same with std::exp in double (SinkhornOptions::double_exp).
@@ -89,8 +178,17 @@ D2GS_ALWAYS_INLINE void plan_body(const T* c, const double* pot, double shift, d
       sc += p * ck;
     }
   } else {
-#pragma omp simd reduction(+ : sm, sc)
-    for (std::size_t j = 0; j < count; ++j) {
+    v8d acc_mass{}, acc_cost{};
+    std::size_t j = 0;
+    for (; j + kLanes <= count; j += kLanes) {
+      const v8d ck = load8(c + j);
+      const v8d p = __builtin_convertvector(exp8(__builtin_convertvector(load8(pot + j) - ck * inv_eps - m, v8f)), v8d);
+      acc_mass += p;
+      acc_cost += p * ck;
+    }
+    sm = hsum(acc_mass);
+    sc = hsum(acc_cost);
+    for (; j < count; ++j) {
       const double ck = static_cast<double>(c[j]);
       const double p = static_cast<double>(exp_core(static_cast<float>(pot[j] - ck * inv_eps - m)));
       sm += p;
@@ -108,6 +206,14 @@ D2GS_VECTOR_CLONES double lse_f32(const float* c, const double* pot, double inv_
 D2GS_VECTOR_CLONES double lse_f64(const double* c, const double* pot, double inv_eps, std::size_t count) {
   return lse_body(c, pot, inv_eps, count);
 }
+D2GS_VECTOR_CLONES double lse_guess_f32(const float* c, const double* pot, double inv_eps, std::size_t count,
+                                        double guess) {
+  return lse_guess_body(c, pot, inv_eps, count, guess);
+}
+D2GS_VECTOR_CLONES double lse_guess_f64(const double* c, const double* pot, double inv_eps, std::size_t count,
+                                        double guess) {
+  return lse_guess_body(c, pot, inv_eps, count, guess);
+}
 D2GS_VECTOR_CLONES void plan_f32(const float* c, const double* pot, double shift, double inv_eps, std::size_t count,
                                  bool precise, double* mass, double* cost) {
   plan_body(c, pot, shift, inv_eps, count, precise, mass, cost);
@@ -117,9 +223,15 @@ D2GS_VECTOR_CLONES void plan_f64(const double* c, const double* pot, double shif
   plan_body(c, pot, shift, inv_eps, count, precise, mass, cost);
 }
 
-double lse(CostSpan span, const double* pot, double inv_eps, std::size_t count, bool precise) {
+// `guess`: the previous value of this log-sum-exp, or NaN when there is none.
+double lse(CostSpan span, const double* pot, double inv_eps, std::size_t count, bool precise, double guess) {
   if (precise)
     return span.f32 ? lse_precise(span.f32, pot, inv_eps, count) : lse_precise(span.f64, pot, inv_eps, count);
+  if (std::isfinite(guess)) {
+    const double value = span.f32 ? lse_guess_f32(span.f32, pot, inv_eps, count, guess)
+                                  : lse_guess_f64(span.f64, pot, inv_eps, count, guess);
+    if (!std::isnan(value)) return value;
+  }
   return span.f32 ? lse_f32(span.f32, pot, inv_eps, count) : lse_f64(span.f64, pot, inv_eps, count);
 }
 void plan(CostSpan span, const double* pot, double shift, double inv_eps, std::size_t count, bool precise,
@@ -276,25 +388,30 @@ SinkhornResult sinkhorn(std::span<const double> a, std::span<const double> b, co
     for (auto& v : psi) v *= rescale;
     eps_prev = eps;
     result.converged = false;
+    bool first = true;  // no previous log-sum-exp at this ε to shift by
+    const double nan = std::numeric_limits<double>::quiet_NaN();
     while (result.iterations < options.max_iterations) {
 #pragma omp parallel num_threads(threads)
       {
 #pragma omp for schedule(dynamic, 16)
         for (std::int64_t si = 0; si < static_cast<std::int64_t>(n); ++si) {
           const auto i = static_cast<std::size_t>(si);
-          const double updated = log_a[i] - lse(cost.row(i, scratch.get()), psi.data(), inv_eps, m, precise);
+          const double guess = first ? nan : log_a[i] - phi[i];
+          const double updated = log_a[i] - lse(cost.row(i, scratch.get()), psi.data(), inv_eps, m, precise, guess);
           dphi[i] = std::abs(updated - phi[i]);
           phi[i] = updated;
         }
 #pragma omp for schedule(dynamic, 16)
         for (std::int64_t sj = 0; sj < static_cast<std::int64_t>(m); ++sj) {
           const auto j = static_cast<std::size_t>(sj);
-          const double updated = log_b[j] - lse(cost.column(j, scratch.get()), phi.data(), inv_eps, n, precise);
+          const double guess = first ? nan : log_b[j] - psi[j];
+          const double updated = log_b[j] - lse(cost.column(j, scratch.get()), phi.data(), inv_eps, n, precise, guess);
           dpsi[j] = std::abs(updated - psi[j]);
           psi[j] = updated;
         }
       }
       ++result.iterations;
+      first = false;
       double change = 0.0;
       for (const double d : dphi) change = std::max(change, d);
       for (const double d : dpsi) change = std::max(change, d);

@@ -1,0 +1,204 @@
+// d2gs imr: Inter-Model Robustness of independently trained models of one scene (method.md §7,
+// docs/imr.md).
+//   d2gs imr RUN_OR_PLY RUN_OR_PLY... [-s SCENE [-r R]] [--reference-camera K] [--epsilon 0.1]
+//            [--samples 10000] [--tolerance 1e-4] [--max-iterations 10000] [--exact-bures] [--debiased]
+//            [--cost stored|stored-double|on-the-fly] [--no-clamp] [--no-normalize] [--epsilon-scaling]
+//            [--json OUT.json]
+// A folder argument is a training run: its highest point_cloud/iteration_N/point_cloud.ply is used.
+// Reference camera: camera K (default 0, the release's first test camera = global image 0) of the scene
+// given with -s; without -s an identity camera at the origin is used (with a warning).
+#include <algorithm>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "cli/commands.hpp"
+#include "d2gs/core/atomic_file.hpp"
+#include "d2gs/core/error.hpp"
+#include "d2gs/core/log.hpp"
+#include "d2gs/eval/imr.hpp"
+#include "d2gs/model/ply.hpp"
+#include "d2gs/scene/scene.hpp"
+
+namespace d2gs::cli {
+namespace {
+
+struct ImrCommandOptions {
+  std::vector<std::string> inputs;
+  std::string source;
+  int resolution = 1;
+  int reference_camera = 0;
+  double epsilon = 0.1;
+  std::size_t samples = 10000;
+  double tolerance = 1e-4;
+  int max_iterations = 10000;
+  bool exact_bures = false;
+  bool debiased = false;
+  bool no_clamp = false;
+  bool no_normalize = false;
+  bool epsilon_scaling = false;
+  int threads = 0;
+  std::string cost = "stored";
+  std::string json;
+};
+
+// A PLY file, or a run folder's highest point_cloud/iteration_N/point_cloud.ply.
+std::filesystem::path resolve_model(const std::filesystem::path& input) {
+  namespace fs = std::filesystem;
+  if (fs::is_regular_file(input)) return input;
+  if (!fs::is_directory(input)) fail_file(input, "no such model file or run folder");
+  const fs::path clouds = input / "point_cloud";
+  long best = -1;
+  fs::path found;
+  if (fs::is_directory(clouds))
+    for (const auto& entry : fs::directory_iterator(clouds)) {
+      const std::string name = entry.path().filename().string();
+      if (!entry.is_directory() || name.rfind("iteration_", 0) != 0) continue;
+      const std::string digits = name.substr(10);
+      if (digits.empty() || digits.size() > 12 || !std::all_of(digits.begin(), digits.end(), ::isdigit)) continue;
+      const long n = std::stol(digits);
+      if (n > best && fs::is_regular_file(entry.path() / "point_cloud.ply")) {
+        best = n;
+        found = entry.path() / "point_cloud.ply";
+      }
+    }
+  if (best < 0) fail_file(input, "run folder without point_cloud/iteration_N/point_cloud.ply");
+  return found;
+}
+
+nlohmann::json transport_json(const TransportResult& t) {
+  return {{"transport_cost", t.transport_cost}, {"scale", t.scale}, {"max_position_term", t.max_position_term},
+          {"normalized_transport_cost", t.normalized_cost}, {"iterations", t.iterations},
+          {"marginal_error_l1", t.marginal_error}, {"last_potential_change", t.last_change},
+          {"converged", t.converged}, {"seconds", t.seconds}};
+}
+
+int run_imr(const ImrCommandOptions& o) {
+  if (o.inputs.size() < 2) fail("imr needs at least 2 models, got {}", o.inputs.size());
+  ImrOptions options;
+  options.mixture.samples = o.samples;
+  options.cost.shape = o.exact_bures ? ShapeCost::ExactBures : ShapeCost::TaylorBures;
+  options.cost.clamp_shape = !o.no_clamp;
+  options.cost.normalize = !o.no_normalize;
+  options.sinkhorn.epsilon = o.epsilon;
+  options.sinkhorn.tolerance = o.tolerance;
+  options.sinkhorn.max_iterations = o.max_iterations;
+  options.sinkhorn.epsilon_scaling = o.epsilon_scaling;
+  options.sinkhorn.threads = o.threads;
+  options.debiased = o.debiased;
+  if (o.cost == "stored") options.storage = CostStorage::StoredFloat;
+  else if (o.cost == "stored-double") options.storage = CostStorage::StoredDouble;
+  else if (o.cost == "on-the-fly") options.storage = CostStorage::OnTheFly;
+  else fail("--cost must be stored, stored-double or on-the-fly (got '{}')", o.cost);
+
+  Camera reference;
+  std::string reference_name = "identity camera at the origin";
+  if (!o.source.empty()) {
+    SceneLoadOptions load;
+    load.resolution = o.resolution;
+    const Scene scene = load_scene(o.source, load);
+    if (o.reference_camera < 0 || o.reference_camera >= static_cast<int>(scene.cameras.size()))
+      fail("--reference-camera {} is outside the scene's {} cameras", o.reference_camera, scene.cameras.size());
+    reference = scene.cameras[static_cast<std::size_t>(o.reference_camera)];
+    reference_name = fmt::format("camera {} ({}) of {}", o.reference_camera, reference.image_name, o.source);
+  } else {
+    spdlog::warn("imr: no scene given (-s): depth strata use an identity camera at the origin, not the release's "
+                 "first test camera");
+  }
+
+  std::vector<GaussianMixture> mixtures;
+  nlohmann::json models = nlohmann::json::array();
+  for (const auto& input : o.inputs) {
+    const std::filesystem::path path = resolve_model(input);
+    const Gaussians model = read_gaussians_ply(path);
+    mixtures.push_back(mixture_from_model(model, reference, options.mixture));
+    spdlog::info("imr: model {}: {} ({} Gaussians, {} components)", mixtures.size() - 1, path.string(), model.size(),
+                 mixtures.back().size());
+    models.push_back({{"input", input}, {"ply", path.string()}, {"gaussians", model.size()},
+                      {"components", mixtures.back().size()}});
+  }
+
+  const ImrResult result = compute_imr(mixtures, options, [](const std::string& line) { spdlog::info("imr: {}", line); });
+
+  std::printf("IMR of %zu models: cost %s%s%s, eps %g, samples %zu, tolerance %g, %s; reference: %s\n",
+              mixtures.size(), to_string(options.cost.shape), options.cost.clamp_shape ? ", shape clamped" : "",
+              options.cost.normalize ? ", mean-normalised" : "", o.epsilon, o.samples, o.tolerance,
+              to_string(options.storage), reference_name.c_str());
+  std::printf("%-6s %14s %12s %12s %6s %11s %5s%s\n", "pair", "S", "d", "scale", "iters", "marg.err", "conv",
+              o.debiased ? "       debiased" : "");
+  for (const auto& p : result.pairs) {
+    const auto& t = p.transport;
+    std::printf("%-6s %14.6g %12.6g %12.6g %6d %11.3g %5s", fmt::format("{}-{}", p.a, p.b).c_str(), t.transport_cost,
+                p.distance, t.scale, t.iterations, t.marginal_error, t.converged ? "yes" : "NO");
+    if (p.debiased) std::printf(" %14.6g", *p.debiased);
+    std::printf("\n");
+  }
+  for (std::size_t k = 0; k < result.self.size(); ++k)
+    std::printf("self %zu: S(%zu,%zu) = %.6g (%d iterations)\n", k, k, k, result.self[k].transport_cost,
+                result.self[k].iterations);
+  std::printf("IMR = %.6f\n", result.imr);
+  if (result.imr_debiased) std::printf("IMR (debiased) = %.6f\n", *result.imr_debiased);
+  bool all_converged = true;
+  for (const auto& p : result.pairs) all_converged = all_converged && p.transport.converged;
+  if (!all_converged) spdlog::warn("imr: some transport problems did not converge within --max-iterations");
+
+  if (!o.json.empty()) {
+    nlohmann::json out;
+    out["models"] = models;
+    out["reference_camera"] = reference_name;
+    out["options"] = {{"epsilon", o.epsilon}, {"samples", o.samples}, {"tolerance", o.tolerance},
+                      {"max_iterations", o.max_iterations}, {"shape_cost", to_string(options.cost.shape)},
+                      {"clamp_shape", options.cost.clamp_shape}, {"normalize", options.cost.normalize},
+                      {"cost_storage", to_string(options.storage)}, {"epsilon_scaling", o.epsilon_scaling},
+                      {"debiased", o.debiased}};
+    nlohmann::json pairs = nlohmann::json::array();
+    for (const auto& p : result.pairs) {
+      nlohmann::json j = transport_json(p.transport);
+      j["a"] = p.a;
+      j["b"] = p.b;
+      j["distance"] = p.distance;
+      if (p.debiased) j["debiased_divergence"] = *p.debiased;
+      pairs.push_back(j);
+    }
+    out["pairs"] = pairs;
+    nlohmann::json self = nlohmann::json::array();
+    for (const auto& t : result.self) self.push_back(transport_json(t));
+    if (!result.self.empty()) out["self"] = self;
+    out["imr"] = result.imr;
+    if (result.imr_debiased) out["imr_debiased"] = *result.imr_debiased;
+    write_file_atomic(o.json, out.dump(2) + "\n");
+  }
+  return 0;
+}
+
+}  // namespace
+
+Run add_imr_command(CLI::App& app) {
+  auto o = std::make_shared<ImrCommandOptions>();
+  CLI::App* sub = app.add_subcommand("imr", "Inter-Model Robustness of independently trained models (docs/imr.md)");
+  sub->add_option("models", o->inputs, "PLY model files or training run folders (highest point_cloud/iteration_N)")
+      ->required();
+  sub->add_option("-s,--source", o->source, "Scene whose camera is the depth-strata reference (metadata only)");
+  sub->add_option("-r,--resolution", o->resolution, "Resolution 1/R used to load the scene")->capture_default_str();
+  sub->add_option("--reference-camera", o->reference_camera, "Camera index in the scene (0 = release: image 0)")
+      ->capture_default_str();
+  sub->add_option("--epsilon", o->epsilon, "Entropic regularisation (on the normalised cost)")->capture_default_str();
+  sub->add_option("--samples", o->samples, "Depth-strata sample count n (0 = all Gaussians)")->capture_default_str();
+  sub->add_option("--tolerance", o->tolerance, "Stop when the log-potentials change less than this")
+      ->capture_default_str();
+  sub->add_option("--max-iterations", o->max_iterations, "Sinkhorn iteration limit")->capture_default_str();
+  sub->add_flag("--exact-bures", o->exact_bures, "Exact Bures shape term instead of the release's Taylor form");
+  sub->add_flag("--debiased", o->debiased, "Also compute S(A,A), S(B,B) and the debiased divergence");
+  sub->add_option("--cost", o->cost, "Cost matrix: stored (float), stored-double or on-the-fly")->capture_default_str();
+  sub->add_flag("--no-clamp", o->no_clamp, "Do not clamp the shape term to [0, max position term]");
+  sub->add_flag("--no-normalize", o->no_normalize, "Do not divide the cost by its mean (epsilon in raw units)");
+  sub->add_flag("--epsilon-scaling", o->epsilon_scaling, "Anneal epsilon from the largest cost down (x0.5 steps)");
+  sub->add_option("--threads", o->threads, "OpenMP threads (0 = automatic)")->capture_default_str();
+  sub->add_option("--json", o->json, "Write every number to this JSON file");
+  return [o]() -> int { return run_imr(*o); };
+}
+
+}  // namespace d2gs::cli
