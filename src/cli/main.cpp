@@ -14,6 +14,7 @@ int main(int argc, char** argv) {
       "Run `d2gs COMMAND --help` for the options of one command.",
       "d2gs"};
   app.require_subcommand(1);
+  app.fallthrough();  // -q/-v may also follow the subcommand
   app.set_version_flag("--version", "d2gs 0.1.0");
   bool quiet = false, verbose = false;
   app.add_flag("-q,--quiet", quiet, "Only print errors (no progress lines)");
