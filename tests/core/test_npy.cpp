@@ -39,6 +39,16 @@ TEST(Npy, RoundTripFloat32) {
   for (std::size_t i = 0; i < v.size(); ++i) EXPECT_EQ(static_cast<float>(a.values[i]), v[i]);
 }
 
+TEST(Npy, RoundTripFloat64) {
+  const auto dir = test::scratch_dir();
+  const std::vector<double> v = {1.0 / 3.0, -1e300, 4e-320, 0.0};
+  write_npy_f64(dir / "d.npy", {4}, v);
+  const auto a = read_npy(dir / "d.npy");
+  ASSERT_EQ(a.shape, (std::vector<std::size_t>{4}));
+  EXPECT_EQ(a.values, v);
+  EXPECT_THROW(write_npy_f64(dir / "e.npy", {3}, v), Error);
+}
+
 TEST(Npy, FortranOrderBecomesRowMajor) {
   // 2x3 array [[0,1,2],[3,4,5]] stored column-major: 0 3 1 4 2 5.
   const double col_major[] = {0, 3, 1, 4, 2, 5};

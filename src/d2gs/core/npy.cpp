@@ -157,8 +157,11 @@ NpyArray parse_npy(std::string_view bytes, const std::filesystem::path& src) {
 
 NpyArray read_npy(const std::filesystem::path& path) { return parse_npy(read_file(path), path); }
 
-void write_npy_f32(const std::filesystem::path& path, const std::vector<std::size_t>& shape,
-                   const std::vector<float>& values) {
+namespace {
+
+template <typename T>
+void write_npy(const std::filesystem::path& path, const std::vector<std::size_t>& shape, const std::vector<T>& values,
+               const char* descr) {
   std::string dims;
   std::size_t count = 1;
   for (auto d : shape) {
@@ -167,7 +170,7 @@ void write_npy_f32(const std::filesystem::path& path, const std::vector<std::siz
   }
   if (shape.size() > 1) dims.pop_back();
   if (count != values.size()) fail_file(path, "shape does not match {} values", values.size());
-  std::string header = "{'descr': '<f4', 'fortran_order': False, 'shape': (" + dims + "), }";
+  std::string header = fmt::format("{{'descr': '{}', 'fortran_order': False, 'shape': ({}), }}", descr, dims);
   const std::size_t total = 10 + header.size() + 1;
   header.append((64 - total % 64) % 64, ' ');
   header.push_back('\n');
@@ -176,8 +179,20 @@ void write_npy_f32(const std::filesystem::path& path, const std::vector<std::siz
   bytes.push_back(static_cast<char>(header.size() >> 8));
   bytes += header;
   static_assert(std::endian::native == std::endian::little, "d2gs writes little-endian files");
-  bytes.append(reinterpret_cast<const char*>(values.data()), values.size() * sizeof(float));
+  bytes.append(reinterpret_cast<const char*>(values.data()), values.size() * sizeof(T));
   write_file_atomic(path, bytes);
+}
+
+}  // namespace
+
+void write_npy_f32(const std::filesystem::path& path, const std::vector<std::size_t>& shape,
+                   const std::vector<float>& values) {
+  write_npy(path, shape, values, "<f4");
+}
+
+void write_npy_f64(const std::filesystem::path& path, const std::vector<std::size_t>& shape,
+                   const std::vector<double>& values) {
+  write_npy(path, shape, values, "<f8");
 }
 
 }  // namespace d2gs

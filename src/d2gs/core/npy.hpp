@@ -18,8 +18,10 @@ struct NpyArray {
 // Parses .npy bytes; `source` names the file in error messages.
 NpyArray parse_npy(std::string_view bytes, const std::filesystem::path& source);
 NpyArray read_npy(const std::filesystem::path& path);
-// Writes a float32 little-endian C-order array atomically.
+// Write a float32 / float64 little-endian C-order array atomically.
 void write_npy_f32(const std::filesystem::path& path, const std::vector<std::size_t>& shape,
                    const std::vector<float>& values);
+void write_npy_f64(const std::filesystem::path& path, const std::vector<std::size_t>& shape,
+                   const std::vector<double>& values);
 
 }  // namespace d2gs

@@ -655,21 +655,6 @@ nlohmann::json read_scene_json(const fs::path& dir) {
   }
 }
 
-// float64 little-endian C-order .npy (core/npy writes float32 only).
-void write_npy_f64(const fs::path& path, std::size_t rows, std::size_t cols, const std::vector<double>& values) {
-  std::string header = fmt::format("{{'descr': '<f8', 'fortran_order': False, 'shape': ({}, {}), }}", rows, cols);
-  const std::size_t total = 10 + header.size() + 1;
-  header.append((64 - total % 64) % 64, ' ');
-  header.push_back('\n');
-  std::string bytes("\x93NUMPY\x01\x00", 8);
-  bytes.push_back(static_cast<char>(header.size() & 0xff));
-  bytes.push_back(static_cast<char>(header.size() >> 8));
-  bytes += header;
-  static_assert(std::endian::native == std::endian::little);
-  bytes.append(reinterpret_cast<const char*>(values.data()), values.size() * sizeof(double));
-  write_file_atomic(path, bytes);
-}
-
 // Removes the files of a previous synthetic scene that the new one will not replace: images and depth
 // maps of views >= `views`, and temporaries left by an interrupted run. Nothing else is touched.
 void remove_stale_files(const fs::path& dir, int views) {
@@ -767,7 +752,7 @@ void write_synthetic_scene(const fs::path& dir, const SyntheticSceneOptions& opt
   }
   if (error) std::rethrow_exception(error);
 
-  write_npy_f64(dir / "poses_bounds.npy", static_cast<std::size_t>(n), 17, poses);
+  write_npy_f64(dir / "poses_bounds.npy", {static_cast<std::size_t>(n), 17}, poses);
   PointCloud all;
   for (const auto& p : points) {
     all.positions.insert(all.positions.end(), p.positions.begin(), p.positions.end());
