@@ -114,6 +114,36 @@ TEST(Trainer, RefusesToOverwriteAndRejectsBadCheckpoints) {
   EXPECT_THROW(Trainer{cfg}, Error);
 }
 
+TEST(Trainer, RandomInitLiesInTheTrainingFrustaAndIsNotAnOracle) {
+  const auto dir = test::scratch_dir();
+  auto cfg = fern_config(dir / "run", Method::Gs3d, 3);
+  cfg.init = "random";
+  cfg.random_points = 3000;
+  Trainer t(cfg);
+  EXPECT_FALSE(t.init_is_oracle());
+  ASSERT_EQ(t.model().size(), 3000u);
+  const auto& m = t.model();
+  std::size_t seen = 0;
+  for (std::size_t i = 0; i < m.size(); ++i) {
+    const glm::dvec3 x(m.means[i * 3], m.means[i * 3 + 1], m.means[i * 3 + 2]);
+    for (int v : t.split().train) {
+      const Camera& c = t.scene().cameras[static_cast<std::size_t>(v)];
+      const glm::dvec3 p = c.R_world_to_cam * x + c.t_world_to_cam;
+      const double u = c.fx * p.x / p.z + c.cx, w = c.fy * p.y / p.z + c.cy;
+      if (p.z > 0 && u >= 0 && u <= c.width && w >= 0 && w <= c.height) {
+        ++seen;
+        break;
+      }
+    }
+  }
+  EXPECT_EQ(seen, m.size());  // every point is on a pixel ray of some training view
+  // Another seed draws another cloud.
+  auto cfg2 = cfg;
+  cfg2.model_dir = (dir / "run2").string();
+  cfg2.seed = 5;
+  EXPECT_NE(Trainer(cfg2).model().means, m.means);
+}
+
 TEST(TrainConfig, JsonRoundTripAndUnknownKeys) {
   TrainConfig c;
   c.source = "s";
