@@ -6,4 +6,8 @@ namespace d2gs::cuda {
 int device_count() { return 0; }
 std::string describe_device() { return "this d2gs was built without CUDA"; }
 std::vector<float> sigmoid_on_device(const std::vector<float>&) { fail("CUDA: {}", describe_device()); }
+ProjectionOutputs project_on_device(const std::vector<float>&, const std::vector<float>&, const std::vector<float>&,
+                                    const DeviceCamera&) {
+  fail("CUDA: {}", describe_device());
+}
 }  // namespace d2gs::cuda
