@@ -6,6 +6,7 @@
 #include "cli/commands.hpp"
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
+#include "d2gs/train/presets.hpp"
 #include "d2gs/train/trainer.hpp"
 
 namespace d2gs::cli {
@@ -66,6 +67,15 @@ Run add_train_command(CLI::App& app) {
       "Screen-space gradient threshold (NDC units)");
   opt("--opacity-reset-at", d.opacity_reset_at, "opacity_reset_at", "Iterations of the opacity reset")->delimiter(',');
   opt("--drop-rate", d.dropgaussian_max_rate, "dropgaussian_max_rate", "DropGaussian: final drop rate");
+  auto preset = std::make_shared<std::string>();
+  auto scene_preset = std::make_shared<std::string>();
+  cmd->add_option("--preset", *preset,
+                  "D²GS preset: 'paper' (the paper's formulas and constants) or 'release' (the authors' code, quirks "
+                  "included); individual flags override it")
+      ->check(CLI::IsMember({"paper", "release"}));
+  cmd->add_option("--scene-preset", *scene_preset,
+                  "D²GS per-scene values of the release, e.g. fern, llff/room, mipnerf360/bicycle (weights, rates, "
+                  "far-mask %, DAFE weight)");
   opt("--dd-weight-depth", d.dd_drop.weight_depth, "dd_weight_depth", "D²GS: weight of the depth score");
   opt("--dd-weight-density", d.dd_drop.weight_density, "dd_weight_density", "D²GS: weight of the density score");
   opt("--dd-rate-min", d.dd_drop.rate_min, "dd_rate_min", "D²GS: initial drop rate");
@@ -83,7 +93,7 @@ Run add_train_command(CLI::App& app) {
   flag("--quiet", d.quiet, "quiet", "No progress line");
   cmd->add_option("--resume", *resume, "Continue from a checkpoint (chkpntN.bin) bit-identically");
 
-  return [cfg, config_file, resume, method, keys]() -> int {
+  return [cfg, config_file, resume, method, keys, preset, scene_preset]() -> int {
     nlohmann::json flags;
     to_json(flags, *cfg);
     flags["method"] = *method;
@@ -98,9 +108,18 @@ Run add_train_command(CLI::App& app) {
       for (const char* recorded : {"init_is_oracle", "scene_extent", "split"}) j.erase(recorded);  // saved for the record
       update_from_json(c, j);
     }
+    // Presets apply over the file; explicit flags apply over both.
+    if (!preset->empty()) {
+      apply_d2gs_preset(c, *preset);
+      c.preset = *preset;
+    }
+    if (!scene_preset->empty()) {
+      apply_scene_preset(c, *scene_preset);
+      c.scene_preset = *scene_preset;
+    }
     nlohmann::json given = nlohmann::json::object();
     for (const auto& [option, key] : *keys)
-      if (config_file->empty() || option->count() > 0) given[key] = flags[key];
+      if (option->count() > 0) given[key] = flags[key];
     update_from_json(c, given);
     Trainer trainer(c, *resume);
     trainer.run();

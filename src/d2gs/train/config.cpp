@@ -100,7 +100,7 @@ void to_json(nlohmann::json& j, const TrainConfig& c) {
       {"densify_grad_threshold", c.densify.grad_threshold}, {"percent_dense", c.densify.percent_dense},
       {"min_opacity", c.densify.min_opacity}, {"densify_from", c.densify_from}, {"densify_until", c.densify_until},
       {"densify_every", c.densify_every}, {"opacity_reset_at", c.opacity_reset_at},
-      {"dropgaussian_max_rate", c.dropgaussian_max_rate},
+      {"dropgaussian_max_rate", c.dropgaussian_max_rate}, {"preset", c.preset}, {"scene_preset", c.scene_preset},
       {"dd_weight_depth", c.dd_drop.weight_depth}, {"dd_weight_density", c.dd_drop.weight_density},
       {"dd_rate_min", c.dd_drop.rate_min}, {"dd_rate_max", c.dd_drop.rate_max},
       {"dd_rate_iterations", c.dd_drop.rate_iterations}, {"dd_use_depth_score", c.dd_drop.use_depth_score},
@@ -160,6 +160,8 @@ void update_from_json(TrainConfig& c, const nlohmann::json& j) {
     c.densify_every = k["densify_every"];
     c.opacity_reset_at = k["opacity_reset_at"].get<std::vector<int>>();
     c.dropgaussian_max_rate = k["dropgaussian_max_rate"];
+    c.preset = k["preset"];
+    c.scene_preset = k["scene_preset"];
     c.dd_drop.weight_depth = k["dd_weight_depth"];
     c.dd_drop.weight_density = k["dd_weight_density"];
     c.dd_drop.rate_min = k["dd_rate_min"];

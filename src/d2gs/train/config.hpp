@@ -54,7 +54,9 @@ struct TrainConfig {
   // DropGaussian
   double dropgaussian_max_rate = 0.2;
 
-  // D²GS: DD-Drop and DAFE
+  // D²GS: DD-Drop and DAFE (presets.hpp sets groups of these; the names are kept for the record)
+  std::string preset;        // "paper", "release" or empty
+  std::string scene_preset;  // e.g. "llff/fern", or empty
   DdDropOptions dd_drop;
   int density_refresh_every = 500;
   bool release_density_cache = false;  // the release's quirk (see method.md §4)
