@@ -1,0 +1,73 @@
+#include "d2gs/train/presets.hpp"
+
+#include "d2gs/core/error.hpp"
+
+namespace d2gs {
+
+const std::vector<D2gsScenePreset>& d2gs_scene_presets() {
+  // (w_d, w_ρ, r_min, r_max, mask %, λ_DAFE) per scene, method.md §4.
+  static const std::vector<D2gsScenePreset> presets = {
+      {"llff", "fern", .7, .3, .1, .3, 10, 1.0},       {"llff", "flower", .7, .3, .1, .3, 5, 1.5},
+      {"llff", "fortress", .5, .5, .05, .3, 15, 1.0},  {"llff", "horns", .7, .3, .1, .3, 5, 1.0},
+      {"llff", "leaves", .7, .3, .1, .5, 10, .25},     {"llff", "orchids", .5, .5, .05, .3, 10, .5},
+      {"llff", "room", .15, .85, .05, .5, 20, .5},     {"llff", "trex", .15, .85, .05, .5, 5, .5},
+      {"mipnerf360", "bicycle", .15, .85, .05, .5, 20, 1.0}, {"mipnerf360", "bonsai", .7, .3, .1, .3, 5, .5},
+      {"mipnerf360", "counter", .15, .85, .05, .5, 5, .5},   {"mipnerf360", "garden", .3, .7, .05, .7, 15, .5},
+      {"mipnerf360", "kitchen", .1, .9, .05, .5, 10, .5},    {"mipnerf360", "room", .3, .7, .05, .7, 5, .5},
+      {"mipnerf360", "stump", .3, .7, .05, .7, 10, 1.0},
+  };
+  return presets;
+}
+
+void apply_d2gs_preset(TrainConfig& c, const std::string& preset) {
+  if (preset == "paper") {
+    c.dd_drop.depth_mode = DepthMode::Euclidean;
+    c.release_density_cache = false;
+    c.dd_drop.weight_depth = 0.5;
+    c.dd_drop.weight_density = 0.5;
+    c.dd_drop.rate_min = 0.05;
+    c.dd_drop.rate_max = 0.3;
+    c.dafe_mask_rule = DafeMaskRule::Percentile;
+    c.dafe_tau = 5.0;
+    c.dafe_loss_form = DafeLossForm::Paper;
+    c.dafe_lambda = 1.0f;
+  } else if (preset == "release") {
+    c.dd_drop.depth_mode = DepthMode::ReleaseDot;
+    c.release_density_cache = true;
+    c.dd_drop.weight_depth = 0.3;
+    c.dd_drop.weight_density = 0.7;
+    c.dd_drop.rate_min = 0.05;
+    c.dd_drop.rate_max = 0.3;
+    c.dafe_mask_rule = DafeMaskRule::Percentile;
+    c.dafe_loss_form = DafeLossForm::Release;
+  } else {
+    fail("unknown D2GS preset '{}' (expected paper or release)", preset);
+  }
+}
+
+void apply_scene_preset(TrainConfig& c, const std::string& name) {
+  const auto slash = name.find('/');
+  const std::string dataset = slash == std::string::npos ? "" : name.substr(0, slash);
+  const std::string scene = slash == std::string::npos ? name : name.substr(slash + 1);
+  const D2gsScenePreset* found = nullptr;
+  int matches = 0;
+  std::string known;
+  for (const auto& p : d2gs_scene_presets()) {
+    known += fmt::format("{}{}/{}", known.empty() ? "" : ", ", p.dataset, p.scene);
+    if (scene == p.scene && (dataset.empty() || dataset == p.dataset)) {
+      found = &p;
+      ++matches;
+    }
+  }
+  if (matches == 0) fail("unknown scene preset '{}' (known: {})", name, known);
+  if (matches > 1) fail("scene preset '{}' is ambiguous: name the dataset, e.g. llff/{} or mipnerf360/{}", name, scene, scene);
+  c.dd_drop.weight_depth = found->weight_depth;
+  c.dd_drop.weight_density = found->weight_density;
+  c.dd_drop.rate_min = found->rate_min;
+  c.dd_drop.rate_max = found->rate_max;
+  c.dafe_mask_rule = DafeMaskRule::Percentile;
+  c.dafe_tau = found->mask_percent;
+  c.dafe_lambda = static_cast<float>(found->dafe_lambda);
+}
+
+}  // namespace d2gs

@@ -1,0 +1,32 @@
+#pragma once
+// D²GS presets (method.md §4, §5): the paper's formulas and constants, the authors' released code, and
+// the per-scene values the release uses (LLFF 3 views, Mip-NeRF 360 12 views).
+#include <string>
+#include <vector>
+
+#include "d2gs/train/config.hpp"
+
+namespace d2gs {
+
+struct D2gsScenePreset {
+  const char* dataset;  // "llff" or "mipnerf360"
+  const char* scene;
+  double weight_depth, weight_density, rate_min, rate_max, mask_percent, dafe_lambda;
+};
+
+// Every per-scene configuration of the release, in method.md's order.
+const std::vector<D2gsScenePreset>& d2gs_scene_presets();
+
+// "paper": Euclidean depth, density carried through densification, w_d = w_ρ = 0.5, r 0.05 → 0.3,
+//   far mask 5 %, DAFE loss normalised by the mask area, λ_DAFE = 1.
+// "release": depth x·R_w2c[:,2], the release's density cache, w_d 0.3, w_ρ 0.7, r 0.05 → 0.3,
+//   DAFE loss averaged over all C·H·W values.
+// Throws d2gs::Error for another name.
+void apply_d2gs_preset(TrainConfig& config, const std::string& preset);
+
+// Sets w_d, w_ρ, r_min, r_max, the far-mask percentage and λ_DAFE of a scene: "fern", "llff/fern",
+// "mipnerf360/room" (a bare "room" is ambiguous: LLFF and Mip-NeRF 360 both have one). Throws for an
+// unknown or ambiguous name, listing the known ones.
+void apply_scene_preset(TrainConfig& config, const std::string& name);
+
+}  // namespace d2gs

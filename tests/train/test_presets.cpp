@@ -1,0 +1,46 @@
+#include <gtest/gtest.h>
+
+#include "d2gs/core/error.hpp"
+#include "d2gs/train/presets.hpp"
+
+namespace d2gs {
+namespace {
+
+TEST(Presets, PaperAndRelease) {
+  TrainConfig c;
+  apply_d2gs_preset(c, "release");
+  EXPECT_EQ(c.dd_drop.depth_mode, DepthMode::ReleaseDot);
+  EXPECT_TRUE(c.release_density_cache);
+  EXPECT_DOUBLE_EQ(c.dd_drop.weight_depth, 0.3);
+  EXPECT_DOUBLE_EQ(c.dd_drop.weight_density, 0.7);
+  EXPECT_EQ(c.dafe_loss_form, DafeLossForm::Release);
+  apply_d2gs_preset(c, "paper");
+  EXPECT_EQ(c.dd_drop.depth_mode, DepthMode::Euclidean);
+  EXPECT_FALSE(c.release_density_cache);
+  EXPECT_DOUBLE_EQ(c.dd_drop.weight_depth, 0.5);
+  EXPECT_DOUBLE_EQ(c.dafe_tau, 5.0);
+  EXPECT_EQ(c.dafe_loss_form, DafeLossForm::Paper);
+  EXPECT_THROW(apply_d2gs_preset(c, "best"), Error);
+}
+
+TEST(Presets, SceneValuesOfTheRelease) {
+  TrainConfig c;
+  apply_scene_preset(c, "fern");
+  EXPECT_DOUBLE_EQ(c.dd_drop.weight_depth, 0.7);
+  EXPECT_DOUBLE_EQ(c.dd_drop.rate_min, 0.1);
+  EXPECT_DOUBLE_EQ(c.dafe_tau, 10.0);
+  EXPECT_FLOAT_EQ(c.dafe_lambda, 1.0f);
+  apply_scene_preset(c, "llff/leaves");
+  EXPECT_DOUBLE_EQ(c.dd_drop.rate_max, 0.5);
+  EXPECT_FLOAT_EQ(c.dafe_lambda, 0.25f);
+  apply_scene_preset(c, "mipnerf360/garden");
+  EXPECT_DOUBLE_EQ(c.dd_drop.rate_max, 0.7);
+  EXPECT_DOUBLE_EQ(c.dafe_tau, 15.0);
+  EXPECT_THROW(apply_scene_preset(c, "room"), Error);  // LLFF and Mip-NeRF 360 both have a room
+  EXPECT_THROW(apply_scene_preset(c, "lego"), Error);
+  EXPECT_EQ(d2gs_scene_presets().size(), 15u);
+  for (const auto& p : d2gs_scene_presets()) EXPECT_NEAR(p.weight_depth + p.weight_density, 1.0, 1e-12) << p.scene;
+}
+
+}  // namespace
+}  // namespace d2gs
