@@ -25,6 +25,7 @@
 
 namespace d2gs::cli {
 namespace {
+namespace fs = std::filesystem;
 
 struct ImrCommandOptions {
   std::vector<std::string> inputs;
@@ -47,7 +48,7 @@ struct ImrCommandOptions {
 
 // A PLY file, or a run folder's highest point_cloud/iteration_N/point_cloud.ply.
 std::filesystem::path resolve_model(const std::filesystem::path& input) {
-  namespace fs = std::filesystem;
+
   if (fs::is_regular_file(input)) return input;
   if (!fs::is_directory(input)) fail_file(input, "no such model file or run folder");
   const fs::path clouds = input / "point_cloud";
@@ -96,17 +97,34 @@ int run_imr(const ImrCommandOptions& o) {
 
   Camera reference;
   std::string reference_name = "identity camera at the origin";
-  if (!o.source.empty()) {
+  std::string source = o.source;
+  int resolution = o.resolution;
+  if (source.empty()) {
+    // A training run folder records its scene: take the reference camera from there.
+    for (const auto& input : o.inputs) {
+      const fs::path cfg = fs::path(input) / "config.json";
+      if (!fs::is_regular_file(cfg)) continue;
+      try {
+        const auto j = nlohmann::json::parse(read_file(cfg));
+        source = j.at("source").get<std::string>();
+        resolution = j.at("resolution").get<int>();
+        break;
+      } catch (const nlohmann::json::exception& e) {
+        fail_file(cfg, "cannot read the run's scene ({})", e.what());
+      }
+    }
+  }
+  if (!source.empty()) {
     SceneLoadOptions load;
-    load.resolution = o.resolution;
-    const Scene scene = load_scene(o.source, load);
+    load.resolution = resolution;
+    const Scene scene = load_scene(source, load);
     if (o.reference_camera < 0 || o.reference_camera >= static_cast<int>(scene.cameras.size()))
       fail("--reference-camera {} is outside the scene's {} cameras", o.reference_camera, scene.cameras.size());
     reference = scene.cameras[static_cast<std::size_t>(o.reference_camera)];
-    reference_name = fmt::format("camera {} ({}) of {}", o.reference_camera, reference.image_name, o.source);
+    reference_name = fmt::format("camera {} ({}) of {}", o.reference_camera, reference.image_name, source);
   } else {
-    spdlog::warn("imr: no scene given (-s): depth strata use an identity camera at the origin, not the release's "
-                 "first test camera");
+    spdlog::warn("imr: no scene given (-s) and no run folder: depth strata use an identity camera at the origin, "
+                 "not the release's first test camera");
   }
 
   std::vector<GaussianMixture> mixtures;
