@@ -2,6 +2,7 @@
 // determinism, resume and the output layout.
 #include <gtest/gtest.h>
 
+#include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
 #include "d2gs/core/atomic_file.hpp"
@@ -142,6 +143,32 @@ TEST(Trainer, RandomInitLiesInTheTrainingFrustaAndIsNotAnOracle) {
   cfg2.model_dir = (dir / "run2").string();
   cfg2.seed = 5;
   EXPECT_NE(Trainer(cfg2).model().means, m.means);
+}
+
+TEST(Trainer, RunFolderServesEvalAndImrCommands) {
+  const auto dir = test::scratch_dir();
+  const auto run = dir / "run";
+  const auto r = test::run_cli(fmt::format(
+      "-q train -s '{}' -m '{}' -r 8 --n-views 3 --iterations 4 --init random --random-points 2000",
+      (test::shared_data() / "nerf_llff_data/fern").string(), run.string()));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  ASSERT_TRUE(fs::exists(run / "point_cloud/iteration_4/point_cloud.ply"));
+  fs::remove(run / "results.json");
+  const auto e = test::run_cli(fmt::format("-q eval -m '{}' --json", run.string()));
+  ASSERT_EQ(e.exit_code, 0) << e.output;
+  const auto results = nlohmann::json::parse(read_file(run / "results.json"));
+  EXPECT_EQ(results["per_view"].size(), 3u);
+  EXPECT_EQ(results["iteration"], 4);
+  EXPECT_FALSE(results["init_is_oracle"].get<bool>());
+  EXPECT_TRUE(fs::exists(run / "test/ours_4/renders/image016.png"));
+  // The reference camera of IMR comes from the run's recorded scene.
+  const auto m = test::run_cli(fmt::format("imr '{}' '{}' --samples 300", run.string(), run.string()));
+  ASSERT_EQ(m.exit_code, 0) << m.output;
+  EXPECT_NE(m.output.find("camera 0 (image000.png)"), std::string::npos) << m.output;
+  // Bad input: a folder that is not a run.
+  const auto bad = test::run_cli(fmt::format("eval -m '{}'", dir.string()));
+  EXPECT_EQ(bad.exit_code, 1);
+  EXPECT_NE(bad.output.find("config.json"), std::string::npos) << bad.output;
 }
 
 TEST(TrainConfig, JsonRoundTripAndUnknownKeys) {
