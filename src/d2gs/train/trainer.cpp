@@ -371,11 +371,14 @@ IterationRecord Trainer::step() {
     multiplier = s.multiplier.data();
   } else if (cfg.method == Method::D2gs) {
     if (t == 1 || t % cfg.density_refresh_every == 0 || s.density_cache.empty()) s.density_cache = density_scores(s.model);
-    std::vector<float> density = s.density_cache;
-    if (density.size() != n) {  // only with the release's cache behaviour
-      if (density.size() < n) density.assign(n, 0.5f);
-      else density.resize(n);
+    // The cache has the model's size except with the release's cache behaviour, where it is out of step
+    // after densification: every score 0.5 when the model grew, the first N cached scores when it shrank.
+    std::vector<float> out_of_step;
+    if (s.density_cache.size() != n) {
+      out_of_step = s.density_cache.size() < n ? std::vector<float>(n, 0.5f)
+                                               : std::vector<float>(s.density_cache.begin(), s.density_cache.begin() + static_cast<std::ptrdiff_t>(n));
     }
+    const std::vector<float>& density = s.density_cache.size() == n ? s.density_cache : out_of_step;
     const Camera& cam = s.scene.cameras[static_cast<std::size_t>(s.split.train[static_cast<std::size_t>(view)])];
     s.dd_probabilities = dd_drop_probabilities(gaussian_depths(s.model, cam, cfg.dd_drop.depth_mode), density, cfg.dd_drop, t);
     bernoulli_mask(s.dd_probabilities, s.rng_dropout, s.multiplier);
