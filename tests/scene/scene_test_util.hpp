@@ -8,6 +8,8 @@
 #include <string>
 
 #include <gtest/gtest.h>
+
+#include "d2gs/scene/scene.hpp"
 #include <glm/glm.hpp>
 
 #include "d2gs/core/atomic_file.hpp"
@@ -18,6 +20,13 @@
 namespace d2gs::test {
 
 namespace fs = std::filesystem;
+
+// Load options at resolution 1/r.
+inline SceneLoadOptions res(int r) {
+  SceneLoadOptions o;
+  o.resolution = r;
+  return o;
+}
 
 inline fs::path fern_dir() { return shared_data() / "nerf_llff_data" / "fern"; }
 inline fs::path room_dir() { return shared_data() / "llff_nex_reprocessed" / "room"; }

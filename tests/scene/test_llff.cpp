@@ -16,11 +16,7 @@ namespace {
 namespace fs = std::filesystem;
 using test::expect_error;
 
-SceneLoadOptions res(int r) {
-  SceneLoadOptions o;
-  o.resolution = r;
-  return o;
-}
+using test::res;
 
 TEST(Llff, FernAtOneEighth) {
   const Scene s = load_scene(test::fern_dir(), res(8));

@@ -12,11 +12,7 @@ namespace {
 namespace fs = std::filesystem;
 using test::expect_error;
 
-SceneLoadOptions res(int r) {
-  SceneLoadOptions o;
-  o.resolution = r;
-  return o;
-}
+using test::res;
 
 TEST(Scene, ResampledLengthRoundsHalfToEven) {
   // 3DGS: round(W / R) with Python's round (half to even).
