@@ -32,7 +32,7 @@ DepthMap merge_depth_candidates(const std::vector<const DepthMap*>& candidates, 
     std::size_t n = 0;
     for (float d : v)
       if (std::abs(d - median) <= tol * median) sum += d, ++n;
-    if (2 * n >= v.size()) out.depth[i] = static_cast<float>(sum / static_cast<double>(n));
+    if (2 * n > v.size()) out.depth[i] = static_cast<float>(sum / static_cast<double>(n));
   }
   return out;
 }

@@ -19,7 +19,7 @@ struct FusionOptions {
 };
 
 // Per pixel: the mean of the valid candidates that agree (relative tolerance) with their median;
-// 0 where no candidate is valid or fewer than half agree. All maps must have one size.
+// 0 where no candidate is valid or no more than half agree. All maps must have one size.
 DepthMap merge_depth_candidates(const std::vector<const DepthMap*>& candidates, double relative_tolerance);
 
 // Keeps depth[i] at a pixel when the back-projected point, seen from at least `min_consistent_views`
