@@ -51,6 +51,12 @@ Run add_init_command(CLI::App& app) {
   cmd->add_flag("--white-background", o->white_background, "White background (Blender scenes)");
   cmd->add_option("--seed", o->geometry.seed, "Seed of the random choices (subsampling of large dense clouds)");
   cmd->add_option("--max-features", o->geometry.max_features, "SIFT keypoints per view");
+  cmd->add_option("--sift-contrast", o->geometry.sift_contrast_threshold,
+                  "SIFT contrast threshold (lower: more keypoints in weak texture)");
+  cmd->add_option("--match-ratio", o->geometry.match.ratio, "Lowe's ratio test threshold");
+  cmd->add_flag("--guided-matching", o->geometry.match.guided,
+                "Search descriptors only along the epipolar lines (more points, more outliers) instead of over the "
+                "whole image followed by the epipolar filter");
   cmd->add_option("--epipolar-px", o->geometry.match.epipolar_px,
                   "Epipolar filter threshold in pixels (≤ 0: 0.4 % of the image diagonal)");
   cmd->add_option("--max-reprojection-px", o->geometry.triangulation.max_reprojection_px,

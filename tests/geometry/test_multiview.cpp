@@ -94,6 +94,24 @@ TEST(Matching, RatioTestAndMutualCheck) {
   EXPECT_EQ(match_descriptors(a, b, no_mutual).size(), 3u);
 }
 
+TEST(Matching, GuidedSearchStaysOnTheEpipolarLine) {
+  // Two identical descriptors in b: a global ratio test cannot tell them apart; only one of them lies on
+  // the epipolar line of a's keypoint, so the guided search matches it.
+  const Camera a = look_at({0, 0, 0}, {0, 0, 8}), b = look_at({1.0, 0, 0}, {1.0, 0, 8});
+  const glm::dvec3 X(0.3, 0.2, 7);
+  ViewFeatures fa, fb;
+  std::vector<float> d(kSiftDescriptorSize, 1.0f);
+  fa.keypoints = {*project_point(a, X)};
+  fa.descriptors = d;
+  fb.keypoints = {*project_point(b, X) + glm::dvec2(0, 40), *project_point(b, X) + glm::dvec2(-3, 0.5)};
+  fb.descriptors = d;
+  fb.descriptors.insert(fb.descriptors.end(), d.begin(), d.end());
+  EXPECT_TRUE(match_descriptors(fa, fb, MatchOptions{}).empty());
+  const auto m = match_guided(fa, fb, a, b, MatchOptions{}, 2.0);
+  ASSERT_EQ(m.size(), 1u);
+  EXPECT_EQ(m[0].b, 1);
+}
+
 TEST(Tracks, MatchesChainAcrossViews) {
   const std::vector<std::size_t> counts = {10, 10, 10};
   const std::vector<PairMatches> pairs = {{1, 2, {{7, 3}}}, {0, 1, {{5, 7}, {2, 2}}}};

@@ -142,7 +142,9 @@ const fs::path& synthetic_dir() {
 TEST(TrainingGeometry, SyntheticSceneSparseAndDenseLieOnTheTrueSurfaces) {
   const Scene s = load_scene(synthetic_dir());
   const std::vector<int> views = {1, 3, 12};
-  const TrainingGeometry g = build_training_geometry(s, views, TrainingGeometryOptions{});
+  TrainingGeometryOptions o;
+  o.fusion.pixel_stride = 2;
+  const TrainingGeometry g = build_training_geometry(s, views, o);
   ASSERT_GT(g.sparse.size(), 50u);
   EXPECT_LT(g.mean_reprojection_px(), 0.5);
   // Depth of each sparse point in view 1 against the traced depth at its pixel.

@@ -72,7 +72,7 @@ TEST(TrainingGeometry, Fern3ViewsPointsAccuracyAndOnlyTrainingImages) {
   EXPECT_GT(g.sparse.size(), 150u);
   EXPECT_LT(g.mean_reprojection_px(), 0.6);
   EXPECT_LT(sparse.median_fraction(), 0.006);
-  EXPECT_GT(g.dense.size(), 30000u);
+  EXPECT_GT(g.dense.size(), 10000u);  // every 4th pixel of each axis
   EXPECT_LT(dense.median_fraction(), 0.012);
   // A cloud that is not on the surfaces fails the same measure (the bound can fail).
   PointCloud shifted = g.sparse;
@@ -85,11 +85,11 @@ TEST(TrainingGeometry, Fern3ViewsPointsAccuracyAndOnlyTrainingImages) {
 TEST(TrainingGeometry, SameSeedSameClouds) {
   const Fern3 f = fern3();
   TrainingGeometryOptions o;
-  o.max_dense_points = 20000;  // exercise the seeded subsample
+  o.max_dense_points = 5000;  // exercise the seeded subsample
   o.seed = 4;
   const auto a = build_training_geometry(f.scene, f.split.train, o);
   const auto b = build_training_geometry(f.scene, f.split.train, o);
-  ASSERT_EQ(a.dense.size(), 20000u);
+  ASSERT_EQ(a.dense.size(), 5000u);
   EXPECT_EQ(a.sparse.positions, b.sparse.positions);
   EXPECT_EQ(a.dense.positions, b.dense.positions);
   EXPECT_EQ(a.dense.colors, b.dense.colors);

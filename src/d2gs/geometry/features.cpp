@@ -11,10 +11,10 @@ namespace d2gs {
 
 cv::Mat to_gray_u8(const Image& image);  // geometry/stereo.cpp
 
-ViewFeatures detect_sift(const Image& image, int max_features) {
+ViewFeatures detect_sift(const Image& image, int max_features, double contrast_threshold) {
   if (image.empty()) fail("SIFT: empty image");
   const cv::Mat gray = to_gray_u8(image);
-  auto sift = cv::SIFT::create(std::max(0, max_features));
+  auto sift = cv::SIFT::create(std::max(0, max_features), 3, contrast_threshold);
   std::vector<cv::KeyPoint> kps;
   cv::Mat desc;
   sift->detectAndCompute(gray, cv::noArray(), kps, desc);

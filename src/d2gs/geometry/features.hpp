@@ -18,7 +18,8 @@ struct ViewFeatures {
 inline constexpr int kSiftDescriptorSize = 128;
 
 // Detects up to `max_features` SIFT keypoints (strongest first) on the grey version of `image`
-// (RGB float [0,1]). Deterministic for a given image.
-ViewFeatures detect_sift(const Image& image, int max_features = 8000);
+// (RGB float [0,1]); `contrast_threshold` is SIFT's (OpenCV default 0.04; lower finds more keypoints in
+// weak texture). Deterministic for a given image.
+ViewFeatures detect_sift(const Image& image, int max_features = 8000, double contrast_threshold = 0.04);
 
 }  // namespace d2gs

@@ -15,7 +15,7 @@ namespace d2gs {
 struct FusionOptions {
   double relative_tolerance = 0.02;  // |z − z'| / z' for two depths to agree
   int min_consistent_views = 1;      // other views that must agree
-  int pixel_stride = 2;              // every stride-th pixel (each axis) becomes a point of the cloud
+  int pixel_stride = 4;              // every stride-th pixel (each axis) becomes a point of the cloud
 };
 
 // Per pixel: the mean of the valid candidates that agree (relative tolerance) with their median;

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include <opencv2/features2d.hpp>
 
@@ -61,6 +62,52 @@ std::vector<FeatureMatch> match_descriptors(const ViewFeatures& a, const ViewFea
     if (!(m[0].distance < options.ratio * m[1].distance)) continue;
     if (options.mutual && best_ba[static_cast<std::size_t>(m[0].trainIdx)] != m[0].queryIdx) continue;
     out.push_back({m[0].queryIdx, m[0].trainIdx});
+  }
+  return out;
+}
+
+std::vector<FeatureMatch> match_guided(const ViewFeatures& a, const ViewFeatures& b, const Camera& cam_a,
+                                       const Camera& cam_b, const MatchOptions& options, double max_distance_px) {
+  const glm::dmat3 F = fundamental_from_cameras(cam_a, cam_b);
+  const std::size_t na = a.size(), nb = b.size();
+  constexpr float kNone = std::numeric_limits<float>::infinity();
+  // Best and second-best squared descriptor distances in each direction, among epipolar candidates.
+  struct Best {
+    float d1 = kNone, d2 = kNone;
+    int index = -1;
+    void offer(float d, int i) {
+      if (d < d1) d2 = d1, d1 = d, index = i;
+      else if (d < d2) d2 = d;
+    }
+  };
+  std::vector<Best> best_a(na), best_b(nb);
+  const auto sq = [](const float* x, const float* y) {
+    float s = 0.0f;
+    for (int k = 0; k < kSiftDescriptorSize; ++k) {
+      const float t = x[k] - y[k];
+      s += t * t;
+    }
+    return s;
+  };
+  for (std::size_t i = 0; i < na; ++i) {
+    const glm::dvec3 line = F * glm::dvec3(a.keypoints[i], 1.0);  // in image b
+    const double norm = std::hypot(line.x, line.y);
+    if (norm == 0.0) continue;
+    for (std::size_t j = 0; j < nb; ++j) {
+      if (std::abs(glm::dot(line, glm::dvec3(b.keypoints[j], 1.0))) > max_distance_px * norm) continue;
+      if (epipolar_distance(F, a.keypoints[i], b.keypoints[j]) > max_distance_px) continue;
+      const float d = sq(a.descriptors.data() + i * kSiftDescriptorSize, b.descriptors.data() + j * kSiftDescriptorSize);
+      best_a[i].offer(d, static_cast<int>(j));
+      best_b[j].offer(d, static_cast<int>(i));
+    }
+  }
+  const float ratio2 = static_cast<float>(options.ratio * options.ratio);
+  std::vector<FeatureMatch> out;
+  for (std::size_t i = 0; i < na; ++i) {
+    const Best& ba = best_a[i];
+    if (ba.index < 0 || !(ba.d1 < ratio2 * ba.d2)) continue;  // a single candidate passes (d2 = ∞)
+    if (options.mutual && best_b[static_cast<std::size_t>(ba.index)].index != static_cast<int>(i)) continue;
+    out.push_back({static_cast<int>(i), ba.index});
   }
   return out;
 }

@@ -70,8 +70,10 @@ std::optional<std::pair<double, double>> sparse_depth_range(const Camera& cam, c
 
 std::string options_key(const TrainingGeometryOptions& o) {
   nlohmann::json j = {{"max_features", o.max_features},
+                      {"sift_contrast_threshold", o.sift_contrast_threshold},
                       {"ratio", o.match.ratio},
                       {"mutual", o.match.mutual},
+                      {"guided", o.match.guided},
                       {"epipolar_px", o.match.epipolar_px},
                       {"max_reprojection_px", o.triangulation.max_reprojection_px},
                       {"min_angle_deg", o.triangulation.min_angle_deg},
@@ -121,7 +123,8 @@ TrainingGeometry build_training_geometry(const Scene& scene, const std::vector<i
   std::vector<ViewFeatures> features(n);
 #pragma omp parallel for schedule(dynamic)
   for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(n); ++i)
-    features[static_cast<std::size_t>(i)] = detect_sift(images[static_cast<std::size_t>(i)], options.max_features);
+    features[static_cast<std::size_t>(i)] = detect_sift(images[static_cast<std::size_t>(i)], options.max_features,
+                                                           options.sift_contrast_threshold);
   for (const auto& f : features) g.features.push_back(f.size());
   spdlog::info("init: SIFT: {} keypoints in {} views ({:.2f} s)",
                std::accumulate(g.features.begin(), g.features.end(), std::size_t{0}), n, timer.done("sift"));
@@ -135,15 +138,24 @@ TrainingGeometry build_training_geometry(const Scene& scene, const std::vector<i
   for (std::ptrdiff_t k = 0; k < static_cast<std::ptrdiff_t>(pairs.size()); ++k) {
     auto& p = pairs[static_cast<std::size_t>(k)];
     const auto ia = static_cast<std::size_t>(p.view_a), ib = static_cast<std::size_t>(p.view_b);
-    const auto raw = match_descriptors(features[ia], features[ib], options.match);
-    raw_matches += raw.size();
     double threshold = options.match.epipolar_px;
     if (!(threshold > 0.0)) threshold = 0.004 * std::hypot(cams[ia]->width, cams[ia]->height);
-    p.matches = filter_epipolar(raw, features[ia], features[ib], *cams[ia], *cams[ib], threshold);
+    if (options.match.guided) {
+      p.matches = match_guided(features[ia], features[ib], *cams[ia], *cams[ib], options.match, threshold);
+      raw_matches += p.matches.size();
+    } else {
+      const auto raw = match_descriptors(features[ia], features[ib], options.match);
+      raw_matches += raw.size();
+      p.matches = filter_epipolar(raw, features[ia], features[ib], *cams[ia], *cams[ib], threshold);
+    }
   }
   for (const auto& p : pairs) g.matches += p.matches.size();
-  spdlog::info("init: matching {} pairs: {} ratio/mutual matches, {} after the epipolar filter ({:.2f} s)",
-               pairs.size(), raw_matches, g.matches, timer.done("matching"));
+  if (options.match.guided)
+    spdlog::info("init: matching {} pairs along their epipolar lines: {} matches ({:.2f} s)", pairs.size(), g.matches,
+                 timer.done("matching"));
+  else
+    spdlog::info("init: matching {} pairs: {} ratio/mutual matches, {} after the epipolar filter ({:.2f} s)",
+                 pairs.size(), raw_matches, g.matches, timer.done("matching"));
 
   // Tracks and triangulation.
   TrackStats ts;

@@ -28,6 +28,7 @@ namespace d2gs {
 
 struct TrainingGeometryOptions {
   int max_features = 8000;
+  double sift_contrast_threshold = 0.04;
   MatchOptions match;                    // match.epipolar_px ≤ 0: 0.4 % of the image diagonal
   TriangulationOptions triangulation;
   int min_sparse_points = 20;            // fewer: the views do not overlap enough (error)
