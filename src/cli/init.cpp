@@ -64,6 +64,8 @@ Run add_init_command(CLI::App& app) {
   cmd->add_option("--min-angle", o->geometry.triangulation.min_angle_deg, "Smallest triangulation angle (degrees)");
   cmd->add_flag("--no-dense", o->no_dense, "Sparse points only (no stereo, no depth maps)");
   cmd->add_option("--stereo-neighbors", o->geometry.stereo_neighbors, "Stereo partners of each view (nearest centres)");
+  cmd->add_option("--fusion-tolerance", o->geometry.fusion.relative_tolerance,
+                  "Relative depth difference within which two views agree");
   cmd->add_option("--dense-stride", o->geometry.fusion.pixel_stride, "Pixel stride of the fused cloud");
   cmd->add_flag("--oracle-accuracy", o->oracle_accuracy,
                 "Also measure the clouds against the dataset's all-view SfM points (measurement only)");
@@ -93,16 +95,18 @@ Run add_init_command(CLI::App& app) {
       const auto report = [&](const char* name, const PointCloud& cloud) {
         const CloudAccuracy a = cloud_accuracy(cloud, scene.sfm_points);
         spdlog::info("accuracy ({} vs the all-view SfM ORACLE, {} points): median distance {:.4g} = {:.4f} of the "
-                     "extent {:.4g}; mean {:.4g}",
-                     name, scene.sfm_points.size(), a.median, a.median_fraction(), a.reference_extent, a.mean);
+                     "extent {:.4g}; mean {:.4g} (the oracle's own point spacing: {:.4g})",
+                     name, scene.sfm_points.size(), a.median, a.median_fraction(), a.reference_extent, a.mean,
+                     a.reference_spacing);
         acc[name] = {{"median", a.median}, {"mean", a.mean}, {"extent", a.reference_extent},
-                     {"median_fraction", a.median_fraction()}, {"points", cloud.size()}};
+                     {"median_fraction", a.median_fraction()}, {"reference_spacing", a.reference_spacing},
+                     {"points", cloud.size()}};
       };
       report("sparse", geo.sparse);
       if (g.dense) {
         report("dense", geo.dense);
         // Depth maps: relative error of the stereo depth at the pixels where oracle points project.
-        std::vector<double> rel;
+        std::vector<double> rel, signed_rel;
         for (std::size_t i = 0; i < geo.views.size(); ++i) {
           const Camera& c = scene.cameras[static_cast<std::size_t>(geo.views[i])];
           for (const auto& p : scene.sfm_points.positions) {
@@ -111,16 +115,17 @@ Run add_init_command(CLI::App& app) {
             const double u = c.fx * q.x / q.z + c.cx, v = c.fy * q.y / q.z + c.cy;
             if (!(u >= 0 && v >= 0 && u < c.width && v < c.height)) continue;
             const float d = geo.depth[i].at(static_cast<int>(u), static_cast<int>(v));
-            if (d > 0) rel.push_back(std::abs(d - q.z) / q.z);
+            if (d > 0) rel.push_back(std::abs(d - q.z) / q.z), signed_rel.push_back((d - q.z) / q.z);
           }
         }
         if (!rel.empty()) {
           std::sort(rel.begin(), rel.end());
-          const double med = rel[rel.size() / 2];
+          std::sort(signed_rel.begin(), signed_rel.end());
+          const double med = rel[rel.size() / 2], bias = signed_rel[signed_rel.size() / 2];
           spdlog::info("accuracy (depth maps vs the ORACLE points projected into the training views): median relative "
-                       "error {:.4f} over {} pixels",
-                       med, rel.size());
-          acc["depth"] = {{"median_relative_error", med}, {"pixels", rel.size()}};
+                       "error {:.4f} (signed {:+.4f}) over {} pixels",
+                       med, bias, rel.size());
+          acc["depth"] = {{"median_relative_error", med}, {"median_signed_relative_error", bias}, {"pixels", rel.size()}};
         }
       }
       write_file_atomic(dir / "oracle_accuracy.json", acc.dump(2));

@@ -396,6 +396,9 @@ CloudAccuracy cloud_accuracy(const PointCloud& cloud, const PointCloud& referenc
     hi[k] = v[static_cast<std::size_t>(0.98 * static_cast<double>(v.size() - 1))];
   }
   a.reference_extent = glm::length(hi - lo);
+  std::vector<float> spacing = knn_mean_distance(&reference.positions[0].x, reference.size(), 1, KnnStatistic::MeanDistance);
+  std::nth_element(spacing.begin(), spacing.begin() + static_cast<std::ptrdiff_t>(spacing.size() / 2), spacing.end());
+  a.reference_spacing = spacing[spacing.size() / 2];
   return a;
 }
 

@@ -89,8 +89,10 @@ CachedTrainingGeometry obtain_training_geometry(const Scene& scene, const std::v
 // Accuracy against a reference cloud (used only to measure, e.g. the dataset's all-view SfM points):
 // distance from each point to its nearest reference point; median / mean, and the reference's extent
 // (diagonal of its 2nd–98th percentile box per axis).
+// reference_spacing (median distance from a reference point to its nearest other reference point) tells
+// what a perfect but denser cloud would score: about half the spacing between the reference points.
 struct CloudAccuracy {
-  double median = 0.0, mean = 0.0, reference_extent = 0.0;
+  double median = 0.0, mean = 0.0, reference_extent = 0.0, reference_spacing = 0.0;
   double median_fraction() const { return reference_extent > 0 ? median / reference_extent : 0.0; }
 };
 CloudAccuracy cloud_accuracy(const PointCloud& cloud, const PointCloud& reference);
