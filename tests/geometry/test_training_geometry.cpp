@@ -1,6 +1,6 @@
 // End to end on fern, 3 views at 504×378: point counts, accuracy against the dataset's all-view SfM
 // cloud (used here only to measure), determinism, the no-test-image rule, the files of `d2gs init`,
-// and the one-line error when the views do not overlap.
+// the published layout reused by d2gs train, and the one-line error when the views do not overlap.
 #include <gtest/gtest.h>
 
 #include <set>
@@ -170,6 +170,38 @@ TEST(TrainingGeometry, InitCommandWritesTheLayoutAndTheTrainerLoadsItsDepthPrior
   ASSERT_EQ(t.exit_code, 0) << t.output;
   const auto cfg = nlohmann::json::parse(read_file(dir / "run/config.json"));
   EXPECT_EQ(cfg["dafe_prior_kind"], "depth");
+  EXPECT_FALSE(cfg["init_is_oracle"].get<bool>());
+}
+
+TEST(TrainingGeometry, InitWritesThePublishedLayoutAndTrainReusesIt) {
+  // A copy of fern (1/8 images, poses, SfM model) so that SCENE/3_views is written into scratch, not the shared data.
+  const auto dir = test::scratch_dir();
+  const fs::path scene = dir / "fern";
+  fs::create_directories(scene);
+  for (const char* item : {"images_8", "sparse", "poses_bounds.npy"})
+    fs::copy(fern() / item, scene / item, fs::copy_options::recursive);
+  const auto r = test::run_cli(fmt::format("init -s '{}' --n-views 3 -r 8", scene.string()));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  // Progress and timing of every step.
+  for (const char* step : {"init: read 3 training views", "init: SIFT:", "init: matching 3 pairs", " tracks (",
+                           "init: stereo on", "init: fusion:"})
+    EXPECT_NE(r.output.find(step), std::string::npos) << step << "\n" << r.output;
+  const fs::path views = scene / "3_views";
+  for (const char* file : {"init.json", "sparse/points3D.ply", "dense/fused.ply", "depth/image001.npy",
+                           "depth/image010_valid.png", "depth/image019.npy"})
+    EXPECT_TRUE(fs::exists(views / file)) << file;
+  const auto m = nlohmann::json::parse(read_file(views / "init.json"));
+  for (const char* step : {"read images", "sift", "matching", "triangulation", "stereo", "fusion"})
+    EXPECT_TRUE(m["timings_s"].contains(step)) << step;
+  // d2gs train without --init: the default init is this geometry, reused (not rebuilt into MODEL/init).
+  const auto t = test::run_cli(fmt::format("train -s '{}' -m '{}' -r 8 --n-views 3 --iterations 1 --quiet",
+                                           scene.string(), (dir / "run").string()));
+  ASSERT_EQ(t.exit_code, 0) << t.output;
+  EXPECT_NE(t.output.find("reusing the training-view geometry in " + views.string()), std::string::npos) << t.output;
+  EXPECT_FALSE(fs::exists(dir / "run/init"));
+  EXPECT_EQ(read_point_cloud_ply(dir / "run/input.ply").size(), m["dense_points"].get<std::size_t>());
+  const auto cfg = nlohmann::json::parse(read_file(dir / "run/config.json"));
+  EXPECT_EQ(cfg["init"], "dense");
   EXPECT_FALSE(cfg["init_is_oracle"].get<bool>());
 }
 
