@@ -59,19 +59,18 @@ struct SplatInTile {
   }
 };
 
-// The columns [a, b] (tile-relative) of a tile row (pixel x from px0, offset dy = my - y) that hold
-// pixels the Gaussian can reach (raster_math.hpp, alpha_row_span), and the row vectors [c0, c1] they
-// lie in; false when there are none.
+// The row vectors [c0, c1] of a tile row (pixel x from px0, offset dy = my - y) that hold pixels the
+// Gaussian can reach (raster_math.hpp, alpha_row_span); false when there are none.
 template <typename T>
-D2GS_TILE_INLINE bool row_vectors(const Splat<T>& s, T dy, int px0, int& a, int& b, int& c0, int& c1) {
+D2GS_TILE_INLINE bool row_vectors(const Splat<T>& s, T dy, int px0, int& c0, int& c1) {
   constexpr int VL = Row<T>::kLanes;
   T x_lo, x_hi;
   if (!alpha_row_span(s.mx, dy, s.qa, s.qb, s.qc, s.reach, s.inv_qa, x_lo, x_hi)) return false;
   // Clamp in floating point to just outside the tile before converting (means may be far off-screen).
   x_lo = std::max(x_lo, T(px0 - 1));
   x_hi = std::min(x_hi, T(px0 + S));
-  a = std::max(int(hd_ceil(x_lo)), px0) - px0;
-  b = std::min(int(hd_floor(x_hi)), px0 + S - 1) - px0;
+  const int a = std::max(int(hd_ceil(x_lo)), px0) - px0;
+  const int b = std::min(int(hd_floor(x_hi)), px0 + S - 1) - px0;
   if (a > b) return false;
   c0 = a / VL;
   c1 = b / VL;
@@ -108,10 +107,9 @@ void forward_tile(const Binning<T>& bin, int tile, const T bg[3], T* rgb, T* alp
   const int px0 = (tile % bin.tiles_x) * S, py0 = (tile / bin.tiles_x) * S;
   const int nrows = std::min(S, H - py0), ncols = std::min(S, W - px0);
   V xs[C];
-  M xcol[C], outside_cols[C];  // xcol: tile-relative column of every lane
+  M outside_cols[C];
   for (int x = 0; x < S; ++x) {
     xs[x / VL][x % VL] = T(px0 + x);
-    xcol[x / VL][x % VL] = x;
     outside_cols[x / VL][x % VL] = x < ncols ? 0 : -1;
   }
   int alive = 0;
@@ -139,15 +137,12 @@ void forward_tile(const Binning<T>& bin, int tile, const T bg[3], T* rgb, T* alp
     for (int y = st.y_lo; y <= st.y_hi; ++y) {
       if (row_alive[y] == 0) continue;
       const T dy = s.my - T(py0 + y);
-      int a, b, c0, c1;
-      if (!row_vectors(s, dy, px0, a, b, c0, c1)) continue;
+      int c0, c1;
+      if (!row_vectors(s, dy, px0, c0, c1)) continue;
       const T hy = (T(-0.5) * qc) * dy * dy, by = -qb * dy;
       int stopped_in_row = 0;
       for (int c = c0; c <= c1; ++c) {
         const int k = y * C + c;
-        // Nothing to do unless a pixel of the chord is still live (an exact shortcut: ok below
-        // implies both).
-        if (!any_lane((xcol[c] >= a) & (xcol[c] <= b) & ~done[k])) continue;
         const V power = row_power(st.hx[c], st.dx[c], hy, by);
         const V og = o * exp_row(power);
         V alpha = og < T(kAlphaMax) ? og : V{} + T(kAlphaMax);
@@ -213,11 +208,7 @@ void backward_tile(const Binning<T>& bin, int tile, const T bg[3], const PixelSt
   const int px0 = (tile % bin.tiles_x) * S, py0 = (tile / bin.tiles_x) * S;
   const int nrows = std::min(S, H - py0), ncols = std::min(S, W - px0);
   V xs[C];
-  M xcol[C];  // tile-relative column of every lane
-  for (int x = 0; x < S; ++x) {
-    xs[x / VL][x % VL] = T(px0 + x);
-    xcol[x / VL][x % VL] = x;
-  }
+  for (int x = 0; x < S; ++x) xs[x / VL][x % VL] = T(px0 + x);
   int tile_max = 0;
   for (int y = 0; y < S; ++y) {
     for (int c = 0; c < C; ++c) {
@@ -260,14 +251,11 @@ void backward_tile(const Binning<T>& bin, int tile, const T bg[3], const PixelSt
     for (int y = st.y_lo; y <= st.y_hi; ++y) {
       if (row_max[y] <= jl) continue;
       const T dy = s.my - T(py0 + y);
-      int a, b, c0, c1;
-      if (!row_vectors(s, dy, px0, a, b, c0, c1)) continue;
+      int c0, c1;
+      if (!row_vectors(s, dy, px0, c0, c1)) continue;
       const T hy = (T(-0.5) * qc) * dy * dy, by = -qb * dy;
       for (int c = c0; c <= c1; ++c) {
         const int k = y * C + c;
-        // Nothing to do unless a pixel of the chord composited this Gaussian or one behind it (exact:
-        // ok below implies both).
-        if (!any_lane((xcol[c] >= a) & (xcol[c] <= b) & (jlv < last[k]))) continue;
         const V dx = st.dx[c];
         const V power = row_power(st.hx[c], dx, hy, by);
         const V G = exp_row(power);
