@@ -1,10 +1,11 @@
 // LPIPS benchmark (results in docs/benchmarks.md, "LPIPS").
 //   bench_lpips --benchmark_repetitions=3
 // One pair of real 504×378 images (fern at -r 8, test views 0 and 8) through full-width trunks with
-// random weights (the time does not depend on the values). d2gs's network (im2col + OpenBLAS sgemm)
-// with all and with one OpenBLAS thread, and the same VGG16 built as an OpenCV dnn network as the
+// random weights (the time does not depend on the values). d2gs's network (im2col + OpenBLAS sgemm) in
+// its two threading modes, and the same VGG16 built as an OpenCV dnn network as the
 // alternative that was measured; the dnn variant also reports its relative difference to d2gs.
 #include <cblas.h>
+#include <omp.h>
 
 #include <cmath>
 #include <cstdio>
@@ -62,19 +63,33 @@ const std::pair<d2gs::Image, d2gs::Image>& fern_pair() {
   return pair;
 }
 
+// Args: net (0 vgg16, 1 alexnet), mode (0: bands shared among OpenMP threads, single-threaded GEMMs, the
+// default; 1: bands in turn, GEMMs threaded by OpenBLAS), threads (OpenMP threads in mode 0, OpenBLAS
+// threads in mode 1).
 void BM_LpipsOpenBlas(benchmark::State& state) {
   const bool vgg = state.range(0) == 0;
-  const int threads = static_cast<int>(state.range(1));
-  const d2gs::Lpips net(vgg ? random_weights(kVgg16, {64, 128, 256, 512, 512}) : random_weights(kAlexnet, {64, 192, 384, 256, 256}),
-                        "random");
+  const bool bands = state.range(1) == 0;
+  const int threads = static_cast<int>(state.range(2));
+  d2gs::Lpips net(vgg ? random_weights(kVgg16, {64, 128, 256, 512, 512}) : random_weights(kAlexnet, {64, 192, 384, 256, 256}),
+                  "random");
+  net.set_parallel_bands(bands);
   const auto& [a, b] = fern_pair();
-  openblas_set_num_threads(threads);
+  const int omp_before = omp_get_max_threads();
+  if (bands) omp_set_num_threads(threads);
+  else openblas_set_num_threads(threads);
   for (auto _ : state) benchmark::DoNotOptimize(net.distance(a, b, d2gs::LpipsInputRange::unit).total);
-  openblas_set_num_threads(0);  // back to the default (all cores)
-  state.SetLabel(fmt::format("{} {}x{}, OpenBLAS {} thread(s) ({})", vgg ? "vgg16" : "alexnet", a.width, a.height, threads,
-                             openblas_get_config()));
+  omp_set_num_threads(omp_before);
+  state.SetLabel(fmt::format("{} {}x{}, {}, {} thread(s) ({})", vgg ? "vgg16" : "alexnet", a.width, a.height,
+                             bands ? "OpenMP bands" : "OpenBLAS-threaded GEMM", threads, openblas_get_config()));
 }
-BENCHMARK(BM_LpipsOpenBlas)->Args({0, 2})->Args({0, 1})->Args({1, 2})->Unit(benchmark::kMillisecond)->UseRealTime()->MeasureProcessCPUTime();
+BENCHMARK(BM_LpipsOpenBlas)
+    ->Args({0, 0, 2})
+    ->Args({0, 0, 1})
+    ->Args({0, 1, 2})
+    ->Args({1, 0, 2})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->MeasureProcessCPUTime();
 
 // The same VGG16 LPIPS with the trunk as an OpenCV dnn network (the measured alternative).
 cv::Mat prep(const d2gs::Image& im) {

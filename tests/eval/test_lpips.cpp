@@ -146,13 +146,16 @@ TEST(Lpips, ZeroForIdenticalImagesSymmetricInItsArguments) {
   EXPECT_NEAR(ab, ba, 1e-12 * ab);
 }
 
-TEST(Lpips, BandedIm2colGivesTheSameDistance) {
+TEST(Lpips, BandingAndThreadingModeGiveTheSameDistance) {
   Lpips net(hash_weights(kVgg16, {64, 128, 256, 512, 512}), "x");
   const auto [a, b] = pair_images("64x48");
-  const double whole = net.distance(a, b, LpipsInputRange::unit).total;
-  net.set_im2col_floats(1);  // one output row per GEMM
-  const double banded = net.distance(a, b, LpipsInputRange::unit).total;
-  EXPECT_NEAR(banded, whole, 1e-6 * whole);
+  const double reference = net.distance(a, b, LpipsInputRange::unit).total;
+  net.set_im2col_floats(1);  // one output row per GEMM, shared among the threads
+  EXPECT_NEAR(net.distance(a, b, LpipsInputRange::unit).total, reference, 1e-6 * reference);
+  net.set_parallel_bands(false);  // rows in turn, GEMMs threaded by OpenBLAS
+  EXPECT_NEAR(net.distance(a, b, LpipsInputRange::unit).total, reference, 1e-6 * reference);
+  net.set_im2col_floats(std::size_t{1} << 22);
+  EXPECT_NEAR(net.distance(a, b, LpipsInputRange::unit).total, reference, 1e-6 * reference);
 }
 
 std::string error_of(const TensorFile& f) {

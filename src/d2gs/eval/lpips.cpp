@@ -6,6 +6,7 @@
 
 #include <cblas.h>
 #include <fmt/format.h>
+#include <omp.h>
 
 #include "d2gs/core/error.hpp"
 
@@ -165,21 +166,28 @@ Lpips::Features Lpips::conv_relu(const Features& in, const Conv& c) const {
   out.values.resize(static_cast<std::size_t>(c.out) * plane);
   const int kk = c.kernel * c.kernel;
   const std::size_t K = static_cast<std::size_t>(c.in) * static_cast<std::size_t>(kk);
-  const int band = static_cast<int>(std::clamp<std::size_t>(im2col_floats_ / (K * static_cast<std::size_t>(out.width)), 1,
-                                                            static_cast<std::size_t>(out.height)));
-  std::vector<float> col(K * static_cast<std::size_t>(band) * static_cast<std::size_t>(out.width));
-  for (int r0 = 0; r0 < out.height; r0 += band) {
+  const std::size_t W = static_cast<std::size_t>(out.width);
+  // Bands of output rows: each builds its im2col columns and runs one GEMM. In the default mode the
+  // bands are shared among the OpenMP threads (single-threaded GEMMs); otherwise the bands run in turn
+  // and the GEMM library threads each one.
+  const int threads = parallel_bands_ ? std::max(1, omp_get_max_threads()) : 1;
+  std::size_t rows_budget = std::max<std::size_t>(1, im2col_floats_ / static_cast<std::size_t>(threads) / (K * W));
+  if (threads > 1) rows_budget = std::min<std::size_t>(rows_budget, (static_cast<std::size_t>(out.height) + 2 * threads - 1) / (2 * threads));
+  const int band = static_cast<int>(std::clamp<std::size_t>(rows_budget, 1, static_cast<std::size_t>(out.height)));
+  const int bands = (out.height + band - 1) / band;
+
+  const auto run_band = [&](int b, std::vector<float>& col, bool threaded_im2col) {
+    const int r0 = b * band;
     const int rows = std::min(band, out.height - r0);
     const int n = rows * out.width;
     // col[(ci·k + ky)·k + kx][(r − r0)·W_out + x] = input at (ci, r·s − p + ky, x·s − p + kx), zero outside.
-#pragma omp parallel for schedule(static)
-    for (std::ptrdiff_t row = 0; row < static_cast<std::ptrdiff_t>(K); ++row) {
+    const auto fill_row = [&](std::size_t row) {
       const int ci = static_cast<int>(row) / kk, ky = (static_cast<int>(row) % kk) / c.kernel, kx = static_cast<int>(row) % c.kernel;
-      float* dst = col.data() + static_cast<std::size_t>(row) * static_cast<std::size_t>(n);
+      float* dst = col.data() + row * static_cast<std::size_t>(n);
       const float* src = in.values.data() + static_cast<std::size_t>(ci) * static_cast<std::size_t>(in.height) * static_cast<std::size_t>(in.width);
       for (int r = 0; r < rows; ++r) {
         const int y = (r0 + r) * c.stride - c.pad + ky;
-        float* d = dst + static_cast<std::size_t>(r) * static_cast<std::size_t>(out.width);
+        float* d = dst + static_cast<std::size_t>(r) * W;
         if (y < 0 || y >= in.height) {
           std::fill(d, d + out.width, 0.0f);
           continue;
@@ -190,15 +198,32 @@ Lpips::Features Lpips::conv_relu(const Features& in, const Conv& c) const {
           d[x] = (xi >= 0 && xi < in.width) ? s[xi] : 0.0f;
         }
       }
-    }
-    gemm_(c.out, n, static_cast<int>(K), c.weight.data(), static_cast<int>(K), col.data(), n,
-          out.values.data() + static_cast<std::size_t>(r0) * static_cast<std::size_t>(out.width), static_cast<int>(plane));
-  }
+    };
+    if (threaded_im2col) {
 #pragma omp parallel for schedule(static)
-  for (int o = 0; o < c.out; ++o) {
-    float* p = out.values.data() + static_cast<std::size_t>(o) * plane;
-    const float b = c.bias[static_cast<std::size_t>(o)];
-    for (std::size_t i = 0; i < plane; ++i) p[i] = std::max(p[i] + b, 0.0f);
+      for (std::ptrdiff_t row = 0; row < static_cast<std::ptrdiff_t>(K); ++row) fill_row(static_cast<std::size_t>(row));
+    } else {
+      for (std::size_t row = 0; row < K; ++row) fill_row(row);
+    }
+    float* dst = out.values.data() + static_cast<std::size_t>(r0) * W;
+    gemm_(c.out, n, static_cast<int>(K), c.weight.data(), static_cast<int>(K), col.data(), n, dst, static_cast<int>(plane));
+    for (int o = 0; o < c.out; ++o) {
+      float* p = dst + static_cast<std::size_t>(o) * plane;
+      const float bias = c.bias[static_cast<std::size_t>(o)];
+      for (int i = 0; i < n; ++i) p[i] = std::max(p[i] + bias, 0.0f);
+    }
+  };
+  const std::size_t col_size = K * static_cast<std::size_t>(band) * W;
+  if (parallel_bands_) {
+#pragma omp parallel num_threads(std::min(threads, bands))
+    {
+      std::vector<float> col(col_size);
+#pragma omp for schedule(dynamic, 1)
+      for (int b = 0; b < bands; ++b) run_band(b, col, false);
+    }
+  } else {
+    std::vector<float> col(col_size);
+    for (int b = 0; b < bands; ++b) run_band(b, col, true);
   }
   return out;
 }
@@ -259,6 +284,8 @@ LpipsDistance Lpips::distance(const Image& a, const Image& b, LpipsInputRange ra
       if (!std::isfinite(im->pixels[i]))
         fail("LPIPS ({}): the {} image has a non-finite value at pixel ({}, {})", what, im == &a ? "first" : "second",
              (i / 3) % static_cast<std::size_t>(im->width), (i / 3) / static_cast<std::size_t>(im->width));
+  // One GEMM per OpenMP thread: OpenBLAS must not start threads of its own inside them.
+  if (parallel_bands_ && gemm_ == lpips_gemm_openblas) openblas_set_num_threads(1);
   const auto fa = run_trunk(a, range);
   const auto fb = run_trunk(b, range);
   LpipsDistance d;

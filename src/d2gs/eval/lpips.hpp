@@ -61,6 +61,10 @@ public:
   // The size of the im2col buffer (floats; columns are built a band of output rows at a time). Tests
   // shrink it to exercise the banding; results do not depend on it beyond rounding.
   void set_im2col_floats(std::size_t floats) { im2col_floats_ = floats; }
+  // true (default): bands of output rows are shared among the OpenMP threads, each running a
+  // single-threaded GEMM (distance() sets OpenBLAS to one thread, process-wide; nothing else in d2gs uses
+  // BLAS). false: bands in turn, each GEMM threaded by OpenBLAS (measured in docs/benchmarks.md).
+  void set_parallel_bands(bool on) { parallel_bands_ = on; }
 
 private:
   struct Conv {
@@ -89,6 +93,7 @@ private:
   std::array<int, 5> tap_channels_{};
   LpipsGemm gemm_ = lpips_gemm_openblas;
   std::size_t im2col_floats_ = std::size_t{1} << 22;
+  bool parallel_bands_ = true;
 };
 
 }  // namespace d2gs
