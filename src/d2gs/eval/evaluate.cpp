@@ -38,7 +38,7 @@ EvalSummary evaluate_views(const Gaussians& model, const Scene& scene, const std
     m.psnr = psnr(pred.pixels.data(), gt.pixels.data(), pred.pixels.size());
     m.ssim = ssim_metric(pred.pixels.data(), gt.pixels.data(), pred.width, pred.height, 3);
     if (options.lpips) {
-      m.lpips = options.lpips->distance(pred, gt, options.lpips_range, "view " + cam.image_name).total;
+      m.lpips = options.lpips->distance(pred, gt, options.lpips_range, "view " + cam.image_name + ", render vs ground truth").total;
       m.avge = avge(m.psnr, m.ssim, *m.lpips);
     }
     summary.views.push_back(m);

@@ -241,17 +241,22 @@ std::vector<Lpips::Features> Lpips::run_trunk(const Image& image, LpipsInputRang
       const float in = range == LpipsInputRange::unit ? v : 2.0f * v - 1.0f;
       x.values[ch * plane + i] = (in - kShift[ch]) / kScale[ch];
     }
+  // The taps keep their features (moved, not copied); `cur` is what the next layer reads.
   std::vector<Features> taps(5);
+  const Features* cur = &x;
   for (const Op& op : ops_) {
     if (op.kind == Op::conv_relu) {
-      x = conv_relu(x, convs_[static_cast<std::size_t>(op.index)]);
+      x = conv_relu(*cur, convs_[static_cast<std::size_t>(op.index)]);
+      cur = &x;
     } else if (op.kind == Op::tap) {
-      taps[static_cast<std::size_t>(op.index)] = x;
+      taps[static_cast<std::size_t>(op.index)] = std::move(x);
+      cur = &taps[static_cast<std::size_t>(op.index)];
     } else {
+      const Features& in = *cur;
       Features y;
-      y.channels = x.channels;
-      y.height = pool_out(x.height, op.kernel, op.stride);
-      y.width = pool_out(x.width, op.kernel, op.stride);
+      y.channels = in.channels;
+      y.height = pool_out(in.height, op.kernel, op.stride);
+      y.width = pool_out(in.width, op.kernel, op.stride);
       y.values.resize(static_cast<std::size_t>(y.channels) * static_cast<std::size_t>(y.height) * static_cast<std::size_t>(y.width));
 #pragma omp parallel for schedule(static)
       for (int ch = 0; ch < y.channels; ++ch)
@@ -260,13 +265,14 @@ std::vector<Lpips::Features> Lpips::run_trunk(const Image& image, LpipsInputRang
             float m = -std::numeric_limits<float>::infinity();
             for (int dy = 0; dy < op.kernel; ++dy)
               for (int dx = 0; dx < op.kernel; ++dx)
-                m = std::max(m, x.values[(static_cast<std::size_t>(ch) * static_cast<std::size_t>(x.height) +
-                                          static_cast<std::size_t>(r * op.stride + dy)) * static_cast<std::size_t>(x.width) +
-                                         static_cast<std::size_t>(q * op.stride + dx)]);
+                m = std::max(m, in.values[(static_cast<std::size_t>(ch) * static_cast<std::size_t>(in.height) +
+                                           static_cast<std::size_t>(r * op.stride + dy)) * static_cast<std::size_t>(in.width) +
+                                          static_cast<std::size_t>(q * op.stride + dx)]);
             y.values[(static_cast<std::size_t>(ch) * static_cast<std::size_t>(y.height) + static_cast<std::size_t>(r)) *
                          static_cast<std::size_t>(y.width) + static_cast<std::size_t>(q)] = m;
           }
       x = std::move(y);
+      cur = &x;
     }
   }
   return taps;
