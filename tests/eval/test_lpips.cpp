@@ -208,6 +208,7 @@ TEST(Lpips, CorruptOrMissingFileNamesIt) {
       ADD_FAILURE() << "no error for " << path;
     } catch (const Error& e) {
       EXPECT_NE(std::string(e.what()).find(path.string()), std::string::npos) << e.what();
+      EXPECT_EQ(std::string(e.what()).find('\n'), std::string::npos) << e.what();
     }
   }
 }

@@ -1,4 +1,5 @@
 // `d2gs eval` with and without LPIPS weights: results.json, the table, the input-range label, AVGE, errors.
+#include <algorithm>
 #include <cstdlib>
 
 #include <fmt/format.h>
@@ -89,6 +90,7 @@ TEST(EvalLpipsCli, BadWeightsOrRangeFailWithOneLine) {
     const auto e = test::run_cli(fmt::format("eval -m '{}' --lpips-weights '{}'", run.string(), w.string()));
     EXPECT_EQ(e.exit_code, 1) << e.output;
     EXPECT_EQ(e.output.rfind("d2gs: error: " + w.string(), 0), 0u) << e.output;
+    EXPECT_EQ(std::count(e.output.begin(), e.output.end(), '\n'), 1) << e.output;  // one line
   }
   const auto e = test::run_cli(fmt::format("eval -m '{}' --lpips-weights '{}' --lpips-input-range 0-255", run.string(),
                                            weights().string()));
