@@ -15,5 +15,6 @@ Run add_render_command(CLI::App& app);
 Run add_train_command(CLI::App& app);
 Run add_eval_command(CLI::App& app);
 Run add_imr_command(CLI::App& app);
+Run add_init_command(CLI::App& app);
 
 }  // namespace d2gs::cli

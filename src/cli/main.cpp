@@ -29,6 +29,7 @@ int main(int argc, char** argv) {
   };
   add(d2gs::cli::add_info_command);
   add(d2gs::cli::add_render_command);
+  add(d2gs::cli::add_init_command);
   add(d2gs::cli::add_train_command);
   add(d2gs::cli::add_eval_command);
   add(d2gs::cli::add_imr_command);

@@ -48,8 +48,9 @@ Run add_train_command(CLI::App& app) {
   opt("--iterations", d.iterations, "iterations", "Training iterations");
   opt("--seed", d.seed, "seed", "Seed of every random choice (same seed and input: same model)");
   opt("--init", d.init, "init",
-      "Initial points: a PLY file, 'random', or 'sfm-all-views' (the dataset's points3D: an ORACLE, it saw the "
-      "test views)");
+      "Initial points: 'dense' (default: stereo depth of the training views fused, as `d2gs init`; reuses "
+      "SCENE/{N}_views or MODEL/init), 'sparse' (SIFT points triangulated from the training views), a PLY file, "
+      "'random', or 'sfm-all-views' (the dataset's points3D: an ORACLE, it saw the test views)");
   opt("--random-points", d.random_points, "random_points", "Point count of --init random");
   opt("--position-lr", d.lr.means, "position_lr", "Initial position learning rate (× scene extent)");
   opt("--position-lr-final", d.position_lr_final, "position_lr_final", "Final position learning rate (× extent)");
@@ -81,7 +82,14 @@ Run add_train_command(CLI::App& app) {
   opt("--dd-rate-min", d.dd_drop.rate_min, "dd_rate_min", "D²GS: initial drop rate");
   opt("--dd-rate-max", d.dd_drop.rate_max, "dd_rate_max", "D²GS: final drop rate");
   opt("--dafe-prior", d.dafe_prior_dir, "dafe_prior_dir",
-      "D²GS: folder of per-view prior maps NAME.npy (default: the model's own depth at iteration 1000)");
+      "D²GS: folder of per-view prior maps NAME.npy, or 'stereo' (the depth maps of `d2gs init`, kind depth); "
+      "default: the model's own depth at iteration 1000");
+  auto prior_kind = std::make_shared<std::string>();
+  keys->emplace_back(cmd->add_option("--dafe-prior-kind", *prior_kind,
+                                     "D²GS: the --dafe-prior maps hold 'disparity' (large = near, default) or 'depth' "
+                                     "(0 = no value)")
+                         ->check(CLI::IsMember({"depth", "disparity"})),
+                     "dafe_prior_kind");
   opt("--dafe-tau", d.dafe_tau, "dafe_tau", "D²GS: far-mask percentage (percentile rule)");
   opt("--dafe-lambda", d.dafe_lambda, "dafe_lambda", "D²GS: DAFE loss weight");
   opt("--save-iterations", d.save_iterations, "save_iterations", "Iterations whose model is saved (default: the last)")
@@ -93,10 +101,11 @@ Run add_train_command(CLI::App& app) {
   flag("--quiet", d.quiet, "quiet", "No progress line");
   cmd->add_option("--resume", *resume, "Continue from a checkpoint (chkpntN.bin) bit-identically");
 
-  return [cfg, config_file, resume, method, keys, preset, scene_preset]() -> int {
+  return [cfg, config_file, resume, method, keys, preset, scene_preset, prior_kind]() -> int {
     nlohmann::json flags;
     to_json(flags, *cfg);
     flags["method"] = *method;
+    flags["dafe_prior_kind"] = prior_kind->empty() ? "disparity" : *prior_kind;
     TrainConfig c;
     if (!config_file->empty()) {
       nlohmann::json j;

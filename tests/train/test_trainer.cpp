@@ -32,6 +32,7 @@ TEST(Trainer, TestPsnrRisesWellAboveTheInitialRender) {
   const auto dir = test::scratch_dir();
   auto cfg = fern_config(dir / "run", Method::Gs3d, 300);
   cfg.densify_from = 100;  // densify within the short schedule
+  cfg.init = "sfm-all-views";  // the labelled oracle (the default is the training views' own geometry)
   Trainer trainer(cfg);
   const double before = trainer.evaluate_test_views().psnr;
   trainer.run();
@@ -143,6 +144,32 @@ TEST(Trainer, RandomInitLiesInTheTrainingFrustaAndIsNotAnOracle) {
   cfg2.model_dir = (dir / "run2").string();
   cfg2.seed = 5;
   EXPECT_NE(Trainer(cfg2).model().means, m.means);
+}
+
+TEST(Trainer, DefaultInitIsTheTrainingViewsGeometryWithStereoDepthPriors) {
+  const auto dir = test::scratch_dir();
+  auto cfg = fern_config(dir / "run", Method::D2gs, 2);
+  ASSERT_EQ(cfg.init, "dense");  // the default
+  cfg.dafe_prior_dir = "stereo";
+  Trainer t(cfg);
+  EXPECT_FALSE(t.init_is_oracle());
+  const auto manifest = nlohmann::json::parse(read_file(dir / "run/init/init.json"));
+  EXPECT_EQ(manifest["views"], nlohmann::json({1, 10, 19}));
+  EXPECT_EQ(t.model().size(), manifest["dense_points"].get<std::size_t>());
+  EXPECT_GT(t.model().size(), 10000u);
+  EXPECT_EQ(read_point_cloud_ply(dir / "run/input.ply").size(), t.model().size());
+  EXPECT_EQ(t.config().dafe_prior_kind, PriorKind::Depth);
+  EXPECT_EQ(fs::path(t.config().dafe_prior_dir), dir / "run/init/depth");
+  t.step();
+  t.step();
+  EXPECT_EQ(t.iteration(), 2);
+  // --init sparse: the triangulated SIFT points of the same (cached) geometry.
+  auto sparse = fern_config(dir / "sparse", Method::Gs3d, 1);
+  sparse.init = "sparse";
+  Trainer ts(sparse);
+  EXPECT_FALSE(ts.init_is_oracle());
+  EXPECT_GT(ts.model().size(), 100u);
+  EXPECT_LT(ts.model().size(), 5000u);
 }
 
 TEST(Trainer, RunFolderServesEvalAndImrCommands) {

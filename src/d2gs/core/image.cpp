@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdint>
 #include <fstream>
+#include <utility>
 
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -49,9 +50,17 @@ std::uint32_t be32(const unsigned char* p) {
   return (std::uint32_t{p[0]} << 24) | (std::uint32_t{p[1]} << 16) | (std::uint32_t{p[2]} << 8) | p[3];
 }
 
+ImageReadObserver& image_read_observer() {
+  static ImageReadObserver observer;
+  return observer;
+}
+
 }  // namespace
 
+void set_image_read_observer(ImageReadObserver observer) { image_read_observer() = std::move(observer); }
+
 Image read_image(const fs::path& path) {
+  if (image_read_observer()) image_read_observer()(path);
   std::error_code ec;
   if (!fs::exists(path, ec)) fail_file(path, "image not found");
   cv::Mat m;

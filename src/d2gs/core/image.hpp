@@ -3,6 +3,7 @@
 // [0, 1]. File I/O goes through OpenCV's codecs (PNG, JPEG, ...); colour order in memory is RGB(A).
 #include <cstddef>
 #include <filesystem>
+#include <functional>
 #include <vector>
 
 namespace d2gs {
@@ -27,6 +28,12 @@ struct ImageSize {
   int width = 0;
   int height = 0;
 };
+
+// Called with the path of every image file read_image() decodes (nullptr: none). Lets tests prove that a
+// command reads only the views it may use (the sparse-view protocol: no test view in training or
+// initialisation). Set it before, and clear it after, the code under observation; not thread-safe.
+using ImageReadObserver = std::function<void(const std::filesystem::path&)>;
+void set_image_read_observer(ImageReadObserver observer);
 
 // Decodes an image file to float [0,1] RGB or RGBA (8- and 16-bit sources). Errors name the file.
 Image read_image(const std::filesystem::path& path);

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include <nanoflann.hpp>
 
@@ -57,6 +58,22 @@ std::vector<float> knn_mean_distance(const float* xyz, std::size_t n, int k, Knn
       }
       out[i] = used ? static_cast<float>(sum / static_cast<double>(used)) : 0.0f;
     }
+  }
+  return out;
+}
+
+std::vector<float> nearest_distances(const float* query, std::size_t n, const float* reference, std::size_t m) {
+  std::vector<float> out(n, std::numeric_limits<float>::infinity());
+  if (m == 0 || n == 0) return out;
+  const PointAdaptor adaptor{reference, m};
+  Tree tree(3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(10));
+  tree.buildIndex();
+#pragma omp parallel for schedule(static)
+  for (std::ptrdiff_t ii = 0; ii < static_cast<std::ptrdiff_t>(n); ++ii) {
+    const auto i = static_cast<std::size_t>(ii);
+    std::size_t idx = 0;
+    float d2 = 0.0f;
+    if (tree.knnSearch(query + i * 3, 1, &idx, &d2) == 1) out[i] = std::sqrt(d2);
   }
   return out;
 }

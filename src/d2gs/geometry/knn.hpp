@@ -15,4 +15,8 @@ enum class KnnStatistic { MeanSquaredDistance, MeanDistance };
 // (0 when a point is alone).
 std::vector<float> knn_mean_distance(const float* xyz, std::size_t n, int k, KnnStatistic statistic);
 
+// For each of the n query points, the Euclidean distance to its nearest point of the m reference points
+// (xyz interleaved; infinity when m = 0).
+std::vector<float> nearest_distances(const float* query, std::size_t n, const float* reference, std::size_t m);
+
 }  // namespace d2gs

@@ -33,8 +33,9 @@ struct TrainConfig {
   int iterations = 10000;
   std::uint64_t seed = 0;
 
-  // initial Gaussians: a PLY path, "random", or "sfm-all-views" (oracle: saw the test views)
-  std::string init = "sfm-all-views";
+  // initial Gaussians: "dense" (stereo + fusion of the training views), "sparse" (SIFT triangulation of
+  // the training views), a PLY path, "random", or "sfm-all-views" (oracle: saw the test views)
+  std::string init = "dense";
   int random_points = 10000;
 
   // optimisation
@@ -61,7 +62,7 @@ struct TrainConfig {
   int density_refresh_every = 500;
   bool release_density_cache = false;  // the release's quirk (see method.md §4)
   bool dafe = true;
-  std::string dafe_prior_dir;          // folder of per-view depth/disparity maps
+  std::string dafe_prior_dir;          // folder of per-view depth/disparity maps; "stereo": the init's depths
   PriorKind dafe_prior_kind = PriorKind::Disparity;
   DafeMaskRule dafe_mask_rule = DafeMaskRule::Percentile;
   double dafe_tau = 5.0;               // percent (percentile rule) or fraction (threshold rule)

@@ -22,6 +22,7 @@
 #include "d2gs/train/densify.hpp"
 #include "d2gs/train/dropout.hpp"
 #include "d2gs/train/initialize.hpp"
+#include "d2gs/geometry/training_geometry.hpp"
 #include "d2gs/train/losses.hpp"
 #include "d2gs/train/ssim.hpp"
 
@@ -187,7 +188,11 @@ void load_dafe_priors(Trainer::State& s) {
     Image prior(w, h, 1);
     for (std::size_t i = 0; i < a.values.size(); ++i) prior.pixels[i] = static_cast<float>(a.values[i]);
     if (w != cam.width || h != cam.height) prior = resize_area(prior, cam.width, cam.height);
-    s.dafe_masks[k] = dafe_mask(prior.pixels, cfg.dafe_prior_kind, cfg.dafe_mask_rule, cfg.dafe_tau);
+    // Depth priors mark pixels without a depth by 0 (d2gs init's stereo depth maps): never far.
+    std::vector<std::uint8_t> valid(prior.pixels.size(), 1);
+    if (cfg.dafe_prior_kind == PriorKind::Depth)
+      for (std::size_t i = 0; i < valid.size(); ++i) valid[i] = prior.pixels[i] > 0.0f;
+    s.dafe_masks[k] = dafe_mask(prior.pixels, cfg.dafe_prior_kind, cfg.dafe_mask_rule, cfg.dafe_tau, &valid);
   }
 }
 
@@ -259,7 +264,25 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
   s.rng_densify = Rng::stream(s.cfg.seed, "densify");
 
   PointCloud init;
-  if (s.cfg.init == "sfm-all-views") {
+  // The training-view geometry (init dense/sparse, DAFE prior "stereo"): SCENE/{N}_views written by
+  // `d2gs init` when it matches, else MODEL/init (built there once, reused on --resume).
+  const auto training_geometry = [&s]() {
+    TrainingGeometryOptions go;
+    go.seed = s.cfg.seed;
+    return obtain_training_geometry(s.scene, s.split.train, go,
+                                    {training_geometry_dir(s.scene, s.split.train.size()), s.out() / "init"},
+                                    s.out() / "init");
+  };
+  if (s.cfg.init == "dense" || s.cfg.init == "sparse") {
+    const auto g = training_geometry();
+    const bool dense = s.cfg.init == "dense" && g.has_dense;
+    init = read_point_cloud_ply(dense ? g.dense_ply : g.sparse_ply);
+    if (dense && init.size() < 100) {
+      spdlog::warn("the fused stereo cloud has only {} points; using the sparse points", init.size());
+      init = read_point_cloud_ply(g.sparse_ply);
+    }
+    spdlog::info("initialising from {} points of the training views' geometry", init.size());
+  } else if (s.cfg.init == "sfm-all-views") {
     if (s.scene.sfm_points.empty())
       fail("{}: the scene has no SfM points for --init sfm-all-views; use --init random or --init PLY", s.cfg.source);
     init = s.scene.sfm_points;
@@ -273,6 +296,10 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
   s.model = gaussians_from_point_cloud(init, s.cfg.sh_degree);
   s.adam = Adam::make_state(s.model);
   s.stats.reset(s.model.size());
+  if (s.cfg.method == Method::D2gs && s.cfg.dafe && s.cfg.dafe_prior_dir == "stereo") {
+    s.cfg.dafe_prior_dir = training_geometry().depth_dir.string();
+    s.cfg.dafe_prior_kind = PriorKind::Depth;
+  }
   load_dafe_priors(s);
 
   fs::create_directories(s.out());

@@ -1,0 +1,405 @@
+#include "d2gs/geometry/training_geometry.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <numeric>
+
+#include <nlohmann/json.hpp>
+#include <spdlog/spdlog.h>
+
+#include "d2gs/core/atomic_file.hpp"
+#include "d2gs/core/error.hpp"
+#include "d2gs/core/npy.hpp"
+#include "d2gs/core/random.hpp"
+#include "d2gs/geometry/features.hpp"
+#include "d2gs/geometry/knn.hpp"
+#include "d2gs/geometry/tracks.hpp"
+#include "d2gs/model/ply.hpp"
+
+namespace d2gs {
+namespace fs = std::filesystem;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+class StepTimer {
+public:
+  explicit StepTimer(std::vector<StepTiming>& out) : out_(out) {}
+  double done(const std::string& step) {
+    const auto now = Clock::now();
+    const double s = std::chrono::duration<double>(now - start_).count();
+    out_.push_back({step, s});
+    start_ = now;
+    return s;
+  }
+
+private:
+  std::vector<StepTiming>& out_;
+  Clock::time_point start_ = Clock::now();
+};
+
+std::string view_list(const Scene& scene, const std::vector<int>& views) {
+  std::string s;
+  for (int v : views) s += (s.empty() ? "" : ", ") + scene.cameras[static_cast<std::size_t>(v)].image_name;
+  return s;
+}
+
+glm::u8vec3 color_at(const Image& img, const glm::dvec2& px) {
+  const int x = std::clamp(static_cast<int>(std::floor(px.x)), 0, img.width - 1);
+  const int y = std::clamp(static_cast<int>(std::floor(px.y)), 0, img.height - 1);
+  glm::u8vec3 c;
+  for (int k = 0; k < 3; ++k)
+    c[k] = static_cast<std::uint8_t>(std::lround(std::clamp(img.at(x, y, std::min(k, img.channels - 1)), 0.0f, 1.0f) * 255.0f));
+  return c;
+}
+
+// Depth range of the sparse points in front of a camera: 2nd and 98th percentiles of camera z.
+std::optional<std::pair<double, double>> sparse_depth_range(const Camera& cam, const PointCloud& sparse) {
+  std::vector<double> z;
+  for (const auto& p : sparse.positions) {
+    const glm::dvec3 q = cam.R_world_to_cam * glm::dvec3(p) + cam.t_world_to_cam;
+    if (q.z > 0.0) z.push_back(q.z);
+  }
+  if (z.size() < 10) return std::nullopt;
+  std::sort(z.begin(), z.end());
+  const auto at = [&](double q) { return z[static_cast<std::size_t>(q * static_cast<double>(z.size() - 1))]; };
+  return std::make_pair(at(0.02), at(0.98));
+}
+
+std::string options_key(const TrainingGeometryOptions& o) {
+  nlohmann::json j = {{"max_features", o.max_features},
+                      {"sift_contrast_threshold", o.sift_contrast_threshold},
+                      {"ratio", o.match.ratio},
+                      {"mutual", o.match.mutual},
+                      {"guided", o.match.guided},
+                      {"epipolar_px", o.match.epipolar_px},
+                      {"max_reprojection_px", o.triangulation.max_reprojection_px},
+                      {"min_angle_deg", o.triangulation.min_angle_deg},
+                      {"dense", o.dense},
+                      {"stereo_neighbors", o.stereo_neighbors},
+                      {"block_size", o.stereo.block_size},
+                      {"relative_tolerance", o.fusion.relative_tolerance},
+                      {"min_consistent_views", o.fusion.min_consistent_views},
+                      {"pixel_stride", o.fusion.pixel_stride},
+                      {"max_dense_points", o.max_dense_points},
+                      {"seed", o.seed}};
+  return j.dump();
+}
+
+}  // namespace
+
+double TrainingGeometry::mean_reprojection_px() const {
+  if (sparse_errors_px.empty()) return 0.0;
+  return std::accumulate(sparse_errors_px.begin(), sparse_errors_px.end(), 0.0) /
+         static_cast<double>(sparse_errors_px.size());
+}
+
+double TrainingGeometry::total_seconds() const {
+  double s = 0.0;
+  for (const auto& t : timings) s += t.seconds;
+  return s;
+}
+
+TrainingGeometry build_training_geometry(const Scene& scene, const std::vector<int>& views,
+                                         const TrainingGeometryOptions& options) {
+  TrainingGeometry g;
+  g.views = views;
+  if (views.size() < 2)
+    fail_file(scene.root, "geometry from the training views needs at least 2 views, got {}", views.size());
+  for (int v : views)
+    if (v < 0 || static_cast<std::size_t>(v) >= scene.cameras.size())
+      fail_file(scene.root, "training view {} is out of range", v);
+  const std::size_t n = views.size();
+  std::vector<const Camera*> cams;
+  for (int v : views) cams.push_back(&scene.cameras[static_cast<std::size_t>(v)]);
+  StepTimer timer(g.timings);
+
+  // Images (training views only) and SIFT.
+  std::vector<Image> images(n);
+  for (std::size_t i = 0; i < n; ++i) images[i] = load_image(scene, views[i]);
+  spdlog::info("init: read {} training views ({}) in {:.2f} s", n, view_list(scene, views), timer.done("read images"));
+  std::vector<ViewFeatures> features(n);
+#pragma omp parallel for schedule(dynamic)
+  for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(n); ++i)
+    features[static_cast<std::size_t>(i)] = detect_sift(images[static_cast<std::size_t>(i)], options.max_features,
+                                                           options.sift_contrast_threshold);
+  for (const auto& f : features) g.features.push_back(f.size());
+  spdlog::info("init: SIFT: {} keypoints in {} views ({:.2f} s)",
+               std::accumulate(g.features.begin(), g.features.end(), std::size_t{0}), n, timer.done("sift"));
+
+  // Matching between every pair, epipolar filter from the poses.
+  std::vector<PairMatches> pairs;
+  for (std::size_t a = 0; a < n; ++a)
+    for (std::size_t b = a + 1; b < n; ++b) pairs.push_back({static_cast<int>(a), static_cast<int>(b), {}});
+  std::size_t raw_matches = 0;
+#pragma omp parallel for schedule(dynamic) reduction(+ : raw_matches)
+  for (std::ptrdiff_t k = 0; k < static_cast<std::ptrdiff_t>(pairs.size()); ++k) {
+    auto& p = pairs[static_cast<std::size_t>(k)];
+    const auto ia = static_cast<std::size_t>(p.view_a), ib = static_cast<std::size_t>(p.view_b);
+    double threshold = options.match.epipolar_px;
+    if (!(threshold > 0.0)) threshold = 0.004 * std::hypot(cams[ia]->width, cams[ia]->height);
+    if (options.match.guided) {
+      p.matches = match_guided(features[ia], features[ib], *cams[ia], *cams[ib], options.match, threshold);
+      raw_matches += p.matches.size();
+    } else {
+      const auto raw = match_descriptors(features[ia], features[ib], options.match);
+      raw_matches += raw.size();
+      p.matches = filter_epipolar(raw, features[ia], features[ib], *cams[ia], *cams[ib], threshold);
+    }
+  }
+  for (const auto& p : pairs) g.matches += p.matches.size();
+  if (options.match.guided)
+    spdlog::info("init: matching {} pairs along their epipolar lines: {} matches ({:.2f} s)", pairs.size(), g.matches,
+                 timer.done("matching"));
+  else
+    spdlog::info("init: matching {} pairs: {} ratio/mutual matches, {} after the epipolar filter ({:.2f} s)",
+                 pairs.size(), raw_matches, g.matches, timer.done("matching"));
+
+  // Tracks and triangulation.
+  TrackStats ts;
+  const auto tracks = build_tracks(g.features, pairs, &ts);
+  g.tracks = tracks.size();
+  std::vector<TriangulatedPoint> tri(tracks.size());
+#pragma omp parallel for schedule(dynamic, 64)
+  for (std::ptrdiff_t k = 0; k < static_cast<std::ptrdiff_t>(tracks.size()); ++k) {
+    std::vector<Observation> obs;
+    for (const auto& o : tracks[static_cast<std::size_t>(k)])
+      obs.push_back({cams[static_cast<std::size_t>(o.view)],
+                     features[static_cast<std::size_t>(o.view)].keypoints[static_cast<std::size_t>(o.feature)]});
+    tri[static_cast<std::size_t>(k)] = triangulate(obs, options.triangulation);
+  }
+  for (std::size_t k = 0; k < tracks.size(); ++k) {
+    switch (tri[k].result) {
+      case TriangulationResult::Ok: break;
+      case TriangulationResult::BehindCamera:
+      case TriangulationResult::Degenerate: ++g.rejected_behind; continue;
+      case TriangulationResult::ReprojectionError: ++g.rejected_error; continue;
+      case TriangulationResult::SmallAngle: ++g.rejected_angle; continue;
+    }
+    glm::dvec3 rgb(0.0);
+    for (const auto& o : tracks[k])
+      rgb += glm::dvec3(color_at(images[static_cast<std::size_t>(o.view)],
+                                 features[static_cast<std::size_t>(o.view)].keypoints[static_cast<std::size_t>(o.feature)]));
+    rgb /= static_cast<double>(tracks[k].size());
+    g.sparse.positions.emplace_back(glm::vec3(tri[k].position));
+    g.sparse.colors.emplace_back(glm::u8vec3(glm::round(rgb)));
+    g.sparse_errors_px.push_back(tri[k].mean_error_px);
+    g.sparse_track_lengths.push_back(static_cast<int>(tracks[k].size()));
+  }
+  spdlog::info("init: {} tracks ({} inconsistent dropped) → {} points, mean reprojection error {:.3f} px; rejected: "
+               "{} behind a camera, {} reprojection, {} small angle ({:.2f} s)",
+               tracks.size(), ts.inconsistent, g.sparse.size(), g.mean_reprojection_px(), g.rejected_behind,
+               g.rejected_error, g.rejected_angle, timer.done("triangulation"));
+  if (g.sparse.size() < static_cast<std::size_t>(std::max(1, options.min_sparse_points)))
+    fail_file(scene.root,
+              "only {} points could be triangulated from the training views ({}; {} matches): the views do not "
+              "overlap enough for a geometry of their own (use --init random or --init PLY)",
+              g.sparse.size(), view_list(scene, views), g.matches);
+  if (!options.dense) return g;
+
+  // Dense: rectified SGBM between each view and its nearest views.
+  std::vector<std::pair<std::size_t, std::size_t>> stereo_pairs;
+  for (std::size_t a = 0; a < n; ++a) {
+    std::vector<std::size_t> order;
+    for (std::size_t b = 0; b < n; ++b)
+      if (b != a) order.push_back(b);
+    std::stable_sort(order.begin(), order.end(), [&](std::size_t x, std::size_t y) {
+      return glm::length(cams[x]->center_world() - cams[a]->center_world()) <
+             glm::length(cams[y]->center_world() - cams[a]->center_world());
+    });
+    order.resize(std::min<std::size_t>(order.size(), static_cast<std::size_t>(std::max(1, options.stereo_neighbors))));
+    for (std::size_t b : order) stereo_pairs.emplace_back(std::min(a, b), std::max(a, b));
+  }
+  std::sort(stereo_pairs.begin(), stereo_pairs.end());
+  stereo_pairs.erase(std::unique(stereo_pairs.begin(), stereo_pairs.end()), stereo_pairs.end());
+  std::vector<StereoPairDepth> pair_depth(stereo_pairs.size());
+  std::vector<std::string> pair_errors(stereo_pairs.size());
+#pragma omp parallel for schedule(dynamic)
+  for (std::ptrdiff_t k = 0; k < static_cast<std::ptrdiff_t>(stereo_pairs.size()); ++k) {
+    const auto [a, b] = stereo_pairs[static_cast<std::size_t>(k)];
+    const auto range = sparse_depth_range(*cams[a], g.sparse);
+    if (!range) {
+      pair_errors[static_cast<std::size_t>(k)] = "too few sparse points in front of the camera";
+      continue;
+    }
+    try {
+      pair_depth[static_cast<std::size_t>(k)] =
+          stereo_pair_depth(*cams[a], images[a], *cams[b], images[b], range->first, range->second, options.stereo);
+    } catch (const Error& e) {
+      pair_errors[static_cast<std::size_t>(k)] = e.what();
+    }
+  }
+  std::vector<std::vector<const DepthMap*>> candidates(n);
+  for (std::size_t k = 0; k < stereo_pairs.size(); ++k) {
+    const auto [a, b] = stereo_pairs[k];
+    if (!pair_errors[k].empty()) {
+      spdlog::warn("init: stereo {} / {} skipped: {}", cams[a]->image_name, cams[b]->image_name, pair_errors[k]);
+      continue;
+    }
+    spdlog::debug("init: stereo {} / {}: disparities {}..{}, {} + {} depths", cams[a]->image_name, cams[b]->image_name,
+                  pair_depth[k].min_disparity, pair_depth[k].min_disparity + pair_depth[k].num_disparities,
+                  pair_depth[k].depth_a.valid_count(), pair_depth[k].depth_b.valid_count());
+    candidates[a].push_back(&pair_depth[k].depth_a);
+    candidates[b].push_back(&pair_depth[k].depth_b);
+  }
+  spdlog::info("init: stereo on {} pairs ({:.2f} s)", stereo_pairs.size(), timer.done("stereo"));
+  std::vector<DepthMap> merged(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (candidates[i].empty()) {
+      merged[i].width = cams[i]->width;
+      merged[i].height = cams[i]->height;
+      merged[i].depth.assign(static_cast<std::size_t>(cams[i]->width) * cams[i]->height, 0.0f);
+    } else {
+      merged[i] = merge_depth_candidates(candidates[i], options.fusion.relative_tolerance);
+    }
+  }
+  g.depth = filter_consistent_depths(cams, merged, options.fusion);
+  std::vector<const Image*> image_ptrs;
+  for (const auto& im : images) image_ptrs.push_back(&im);
+  g.dense = fuse_depth_maps(cams, image_ptrs, g.depth, options.fusion.pixel_stride);
+  if (options.max_dense_points > 0 && g.dense.size() > options.max_dense_points) {
+    // Seeded subsample, kept in the original order.
+    Rng rng = Rng::stream(options.seed, "dense-subsample");
+    std::vector<std::size_t> idx(g.dense.size());
+    std::iota(idx.begin(), idx.end(), std::size_t{0});
+    for (std::size_t i = 0; i < options.max_dense_points; ++i)
+      std::swap(idx[i], idx[i + rng.below(idx.size() - i)]);
+    idx.resize(options.max_dense_points);
+    std::sort(idx.begin(), idx.end());
+    PointCloud sub;
+    for (std::size_t i : idx) sub.positions.push_back(g.dense.positions[i]), sub.colors.push_back(g.dense.colors[i]);
+    g.dense = std::move(sub);
+  }
+  std::size_t valid = 0, total = 0;
+  for (const auto& d : g.depth) valid += d.valid_count(), total += d.depth.size();
+  spdlog::info("init: fusion: {:.1f} % of the pixels have a consistent depth → {} dense points ({:.2f} s)",
+               total ? 100.0 * static_cast<double>(valid) / static_cast<double>(total) : 0.0, g.dense.size(),
+               timer.done("fusion"));
+  return g;
+}
+
+fs::path training_geometry_dir(const Scene& scene, std::size_t n_views) {
+  return scene.root / fmt::format("{}_views", n_views);
+}
+
+void write_training_geometry(const fs::path& dir, const Scene& scene, const TrainingGeometry& g,
+                             const TrainingGeometryOptions& options) {
+  fs::create_directories(dir / "sparse");
+  write_point_cloud_ply(dir / "sparse" / "points3D.ply", g.sparse);
+  nlohmann::json depth_files = nlohmann::json::array();
+  if (!g.depth.empty()) {
+    fs::create_directories(dir / "dense");
+    fs::create_directories(dir / "depth");
+    write_point_cloud_ply(dir / "dense" / "fused.ply", g.dense);
+    for (std::size_t i = 0; i < g.views.size(); ++i) {
+      const Camera& cam = scene.cameras[static_cast<std::size_t>(g.views[i])];
+      const std::string stem = fs::path(cam.image_name).stem().string();
+      const DepthMap& d = g.depth[i];
+      write_npy_f32(dir / "depth" / (stem + ".npy"), {static_cast<std::size_t>(d.height), static_cast<std::size_t>(d.width)},
+                    d.depth);
+      Image mask(d.width, d.height, 1);
+      for (std::size_t p = 0; p < d.depth.size(); ++p) mask.pixels[p] = d.depth[p] > 0.0f ? 1.0f : 0.0f;
+      write_image(dir / "depth" / (stem + "_valid.png"), mask);
+      depth_files.push_back(stem + ".npy");
+    }
+  }
+  nlohmann::json names = nlohmann::json::array(), timings = nlohmann::json::object();
+  for (int v : g.views) names.push_back(scene.cameras[static_cast<std::size_t>(v)].image_name);
+  for (const auto& t : g.timings) timings[t.step] = t.seconds;
+  nlohmann::json m = {
+      {"format", "d2gs-training-geometry-1"},
+      {"views", g.views},
+      {"image_names", names},
+      {"resolution", scene.resolution},
+      {"width", scene.cameras[static_cast<std::size_t>(g.views[0])].width},
+      {"height", scene.cameras[static_cast<std::size_t>(g.views[0])].height},
+      {"options", options_key(options)},
+      {"sparse", "sparse/points3D.ply"},
+      {"sparse_points", g.sparse.size()},
+      {"mean_reprojection_px", g.mean_reprojection_px()},
+      {"features", g.features},
+      {"matches", g.matches},
+      {"tracks", g.tracks},
+      {"dense", g.depth.empty() ? "" : "dense/fused.ply"},
+      {"dense_points", g.dense.size()},
+      {"depth_dir", g.depth.empty() ? "" : "depth"},
+      {"depth_files", depth_files},
+      {"depth_kind", "depth"},
+      {"timings_s", timings},
+      {"total_s", g.total_seconds()}};
+  write_file_atomic(dir / "init.json", m.dump(2));  // last: a manifest means the files above are complete
+}
+
+std::optional<CachedTrainingGeometry> find_training_geometry(const fs::path& dir, const Scene& scene,
+                                                             const std::vector<int>& views,
+                                                             const TrainingGeometryOptions& options) {
+  std::error_code ec;
+  if (!fs::is_regular_file(dir / "init.json", ec)) return std::nullopt;
+  nlohmann::json m;
+  try {
+    m = nlohmann::json::parse(read_file(dir / "init.json"));
+  } catch (const nlohmann::json::exception&) {
+    spdlog::warn("{}: unreadable manifest, ignored", (dir / "init.json").string());
+    return std::nullopt;
+  }
+  nlohmann::json names = nlohmann::json::array();
+  for (int v : views) names.push_back(scene.cameras[static_cast<std::size_t>(v)].image_name);
+  if (m.value("format", "") != "d2gs-training-geometry-1" || m.value("views", nlohmann::json()) != nlohmann::json(views) ||
+      m.value("image_names", nlohmann::json()) != names || m.value("resolution", 0) != scene.resolution ||
+      m.value("options", "") != options_key(options))
+    return std::nullopt;
+  CachedTrainingGeometry c;
+  c.dir = dir;
+  c.sparse_ply = dir / m.value("sparse", "sparse/points3D.ply");
+  c.has_dense = !m.value("dense", "").empty();
+  if (c.has_dense) {
+    c.dense_ply = dir / m.value("dense", "");
+    c.depth_dir = dir / m.value("depth_dir", "depth");
+  }
+  if (!fs::is_regular_file(c.sparse_ply, ec) || (c.has_dense && !fs::is_regular_file(c.dense_ply, ec)))
+    return std::nullopt;
+  return c;
+}
+
+CachedTrainingGeometry obtain_training_geometry(const Scene& scene, const std::vector<int>& views,
+                                                const TrainingGeometryOptions& options,
+                                                const std::vector<fs::path>& cache_dirs, const fs::path& write_dir) {
+  for (const auto& dir : cache_dirs)
+    if (auto c = find_training_geometry(dir, scene, views, options)) {
+      spdlog::info("init: reusing the training-view geometry in {}", dir.string());
+      return *c;
+    }
+  spdlog::info("init: building the geometry of the {} training views into {}", views.size(), write_dir.string());
+  const TrainingGeometry g = build_training_geometry(scene, views, options);
+  write_training_geometry(write_dir, scene, g, options);
+  auto c = find_training_geometry(write_dir, scene, views, options);
+  if (!c) fail_file(write_dir / "init.json", "geometry just written cannot be read back");
+  return *c;
+}
+
+CloudAccuracy cloud_accuracy(const PointCloud& cloud, const PointCloud& reference) {
+  CloudAccuracy a;
+  if (cloud.empty() || reference.empty()) return a;
+  const auto d = nearest_distances(&cloud.positions[0].x, cloud.size(), &reference.positions[0].x, reference.size());
+  std::vector<float> s = d;
+  std::nth_element(s.begin(), s.begin() + static_cast<std::ptrdiff_t>(s.size() / 2), s.end());
+  a.median = s[s.size() / 2];
+  a.mean = std::accumulate(d.begin(), d.end(), 0.0) / static_cast<double>(d.size());
+  glm::dvec3 lo(0.0), hi(0.0);
+  for (int k = 0; k < 3; ++k) {
+    std::vector<float> v;
+    for (const auto& p : reference.positions) v.push_back(p[k]);
+    std::sort(v.begin(), v.end());
+    lo[k] = v[static_cast<std::size_t>(0.02 * static_cast<double>(v.size() - 1))];
+    hi[k] = v[static_cast<std::size_t>(0.98 * static_cast<double>(v.size() - 1))];
+  }
+  a.reference_extent = glm::length(hi - lo);
+  std::vector<float> spacing = knn_mean_distance(&reference.positions[0].x, reference.size(), 1, KnnStatistic::MeanDistance);
+  std::nth_element(spacing.begin(), spacing.begin() + static_cast<std::ptrdiff_t>(spacing.size() / 2), spacing.end());
+  a.reference_spacing = spacing[spacing.size() / 2];
+  return a;
+}
+
+}  // namespace d2gs

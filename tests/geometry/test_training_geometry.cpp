@@ -1,0 +1,209 @@
+// End to end on fern, 3 views at 504×378: point counts, accuracy against the dataset's all-view SfM
+// cloud (used here only to measure), determinism, the no-test-image rule, the files of `d2gs init`,
+// the published layout reused by d2gs train, and the one-line error when the views do not overlap.
+#include <gtest/gtest.h>
+
+#include <set>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "d2gs/core/atomic_file.hpp"
+#include "d2gs/core/error.hpp"
+#include "d2gs/core/npy.hpp"
+#include "d2gs/geometry/training_geometry.hpp"
+#include "d2gs/model/ply.hpp"
+#include "d2gs/scene/split.hpp"
+#include "test_paths.hpp"
+
+namespace d2gs {
+namespace {
+namespace fs = std::filesystem;
+
+fs::path fern() { return test::shared_data() / "nerf_llff_data/fern"; }
+
+struct Fern3 {
+  Scene scene;
+  Split split;
+};
+
+Fern3 fern3() {
+  SceneLoadOptions lo;
+  lo.resolution = 8;
+  Fern3 f{load_scene(fern(), lo), {}};
+  SplitOptions so;
+  so.n_views = 3;
+  f.split = make_split(f.scene, so);
+  return f;
+}
+
+// Records every decoded image file while alive.
+struct ImageReads {
+  std::vector<fs::path> paths;
+  ImageReads() {
+    set_image_read_observer([this](const fs::path& p) { paths.push_back(p); });
+  }
+  ~ImageReads() { set_image_read_observer(nullptr); }
+};
+
+TEST(TrainingGeometry, Fern3ViewsPointsAccuracyAndOnlyTrainingImages) {
+  const Fern3 f = fern3();
+  ASSERT_EQ(f.split.train, (std::vector<int>{1, 10, 19}));
+  TrainingGeometry g;
+  std::set<fs::path> read;
+  {
+    ImageReads reads;
+    g = build_training_geometry(f.scene, f.split.train, TrainingGeometryOptions{});
+    read.insert(reads.paths.begin(), reads.paths.end());
+    EXPECT_EQ(reads.paths.size(), 3u);
+  }
+  // The no-test-image rule: exactly the training views' files were decoded.
+  std::set<fs::path> train;
+  for (int v : f.split.train) train.insert(f.scene.cameras[static_cast<std::size_t>(v)].image_path);
+  EXPECT_EQ(read, train);
+  for (int v : f.split.test) EXPECT_EQ(read.count(f.scene.cameras[static_cast<std::size_t>(v)].image_path), 0u);
+
+  const CloudAccuracy sparse = cloud_accuracy(g.sparse, f.scene.sfm_points);
+  const CloudAccuracy dense = cloud_accuracy(g.dense, f.scene.sfm_points);
+  std::printf("fern 3 views: %zu sparse points (mean reprojection %.3f px, median distance to the oracle %.4f of the "
+              "extent), %zu dense points (%.4f)\n",
+              g.sparse.size(), g.mean_reprojection_px(), sparse.median_fraction(), g.dense.size(),
+              dense.median_fraction());
+  EXPECT_GT(g.sparse.size(), 150u);
+  EXPECT_LT(g.mean_reprojection_px(), 0.6);
+  EXPECT_LT(sparse.median_fraction(), 0.006);
+  EXPECT_GT(g.dense.size(), 10000u);  // every 4th pixel of each axis
+  EXPECT_LT(dense.median_fraction(), 0.012);
+  // A cloud that is not on the surfaces fails the same measure (the bound can fail).
+  PointCloud shifted = g.sparse;
+  for (auto& p : shifted.positions) p += glm::vec3(0.0f, 0.0f, 0.05f * static_cast<float>(sparse.reference_extent));
+  EXPECT_GT(cloud_accuracy(shifted, f.scene.sfm_points).median_fraction(), 0.006);
+  ASSERT_EQ(g.depth.size(), 3u);
+  for (const auto& d : g.depth) EXPECT_GT(static_cast<double>(d.valid_count()) / static_cast<double>(d.depth.size()), 0.2);
+}
+
+TEST(TrainingGeometry, SameSeedSameClouds) {
+  const Fern3 f = fern3();
+  TrainingGeometryOptions o;
+  o.max_dense_points = 5000;  // exercise the seeded subsample
+  o.seed = 4;
+  const auto a = build_training_geometry(f.scene, f.split.train, o);
+  const auto b = build_training_geometry(f.scene, f.split.train, o);
+  ASSERT_EQ(a.dense.size(), 5000u);
+  EXPECT_EQ(a.sparse.positions, b.sparse.positions);
+  EXPECT_EQ(a.dense.positions, b.dense.positions);
+  EXPECT_EQ(a.dense.colors, b.dense.colors);
+}
+
+TEST(TrainingGeometry, CachedGeometryIsReusedOnlyWhenItMatches) {
+  const auto dir = test::scratch_dir();
+  const Fern3 f = fern3();
+  TrainingGeometryOptions o;
+  o.dense = false;
+  const auto built = obtain_training_geometry(f.scene, f.split.train, o, {dir / "none", dir / "a"}, dir / "a");
+  EXPECT_EQ(built.dir, dir / "a");
+  EXPECT_FALSE(built.has_dense);
+  {
+    ImageReads reads;
+    const auto again = obtain_training_geometry(f.scene, f.split.train, o, {dir / "a"}, dir / "b");
+    EXPECT_EQ(again.dir, dir / "a");
+    EXPECT_TRUE(reads.paths.empty());  // nothing recomputed
+  }
+  EXPECT_FALSE(fs::exists(dir / "b"));
+  // Other views, or other options: not a match.
+  EXPECT_FALSE(find_training_geometry(dir / "a", f.scene, {1, 10}, o));
+  TrainingGeometryOptions other = o;
+  other.triangulation.min_angle_deg = 2.0;
+  EXPECT_FALSE(find_training_geometry(dir / "a", f.scene, f.split.train, other));
+  EXPECT_TRUE(find_training_geometry(dir / "a", f.scene, f.split.train, o));
+}
+
+TEST(TrainingGeometry, ViewsThatDoNotOverlapGiveAOneLineError) {
+  Fern3 f = fern3();
+  // Turn view 10 around: it now looks away from what views 1 and 19 see.
+  Camera& c = f.scene.cameras[10];
+  const glm::dmat3 flip(glm::dvec3(-1, 0, 0), glm::dvec3(0, 1, 0), glm::dvec3(0, 0, -1));
+  const glm::dvec3 centre = c.center_world();
+  c.R_world_to_cam = flip * c.R_world_to_cam;
+  c.t_world_to_cam = -c.R_world_to_cam * centre;
+  try {
+    (void)build_training_geometry(f.scene, {10, 19}, TrainingGeometryOptions{});
+    FAIL() << "expected an error";
+  } catch (const Error& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("do not overlap enough"), std::string::npos) << m;
+    EXPECT_NE(m.find(fern().string()), std::string::npos) << m;
+    EXPECT_EQ(m.find('\n'), std::string::npos);
+  }
+}
+
+TEST(TrainingGeometry, InitCommandWritesTheLayoutAndTheTrainerLoadsItsDepthPriors) {
+  const auto dir = test::scratch_dir();
+  const auto r = test::run_cli(
+      fmt::format("init -s '{}' --n-views 3 -r 8 -o '{}' --oracle-accuracy", fern().string(), (dir / "init").string()));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("SIFT"), std::string::npos) << r.output;
+  const auto m = nlohmann::json::parse(read_file(dir / "init/init.json"));
+  EXPECT_EQ(m["views"], nlohmann::json({1, 10, 19}));
+  const PointCloud sparse = read_point_cloud_ply(dir / "init/sparse/points3D.ply");
+  const PointCloud dense = read_point_cloud_ply(dir / "init/dense/fused.ply");
+  EXPECT_EQ(sparse.size(), m["sparse_points"].get<std::size_t>());
+  EXPECT_EQ(dense.size(), m["dense_points"].get<std::size_t>());
+  for (const char* name : {"image001", "image010", "image019"}) {
+    const NpyArray d = read_npy(dir / "init/depth" / (std::string(name) + ".npy"));
+    EXPECT_EQ(d.shape, (std::vector<std::size_t>{378, 504}));
+    EXPECT_TRUE(fs::exists(dir / "init/depth" / (std::string(name) + "_valid.png")));
+  }
+  EXPECT_FALSE(fs::exists(dir / "init/depth/image000.npy"));  // test view
+  const auto acc = nlohmann::json::parse(read_file(dir / "init/oracle_accuracy.json"));
+  EXPECT_LT(acc["sparse"]["median_fraction"].get<double>(), 0.006);
+  // Bad input: one line.
+  const auto bad = test::run_cli(fmt::format("init -s '{}' --n-views 1 -r 8 -o '{}'", fern().string(), (dir / "x").string()));
+  EXPECT_EQ(bad.exit_code, 1);
+  EXPECT_NE(bad.output.find("d2gs: error: "), std::string::npos) << bad.output;
+  EXPECT_NE(bad.output.find("at least 2 views"), std::string::npos) << bad.output;
+  // The depth maps as DAFE priors of a short D²GS run that initialises from the same cloud.
+  const auto t = test::run_cli(fmt::format(
+      "-q train -s '{}' -m '{}' -r 8 --n-views 3 --iterations 2 --method d2gs --init '{}' --dafe-prior '{}' "
+      "--dafe-prior-kind depth",
+      fern().string(), (dir / "run").string(), (dir / "init/dense/fused.ply").string(), (dir / "init/depth").string()));
+  ASSERT_EQ(t.exit_code, 0) << t.output;
+  const auto cfg = nlohmann::json::parse(read_file(dir / "run/config.json"));
+  EXPECT_EQ(cfg["dafe_prior_kind"], "depth");
+  EXPECT_FALSE(cfg["init_is_oracle"].get<bool>());
+}
+
+TEST(TrainingGeometry, InitWritesThePublishedLayoutAndTrainReusesIt) {
+  // A copy of fern (1/8 images, poses, SfM model) so that SCENE/3_views is written into scratch, not the shared data.
+  const auto dir = test::scratch_dir();
+  const fs::path scene = dir / "fern";
+  fs::create_directories(scene);
+  for (const char* item : {"images_8", "sparse", "poses_bounds.npy"})
+    fs::copy(fern() / item, scene / item, fs::copy_options::recursive);
+  const auto r = test::run_cli(fmt::format("init -s '{}' --n-views 3 -r 8", scene.string()));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  // Progress and timing of every step.
+  for (const char* step : {"init: read 3 training views", "init: SIFT:", "init: matching 3 pairs", " tracks (",
+                           "init: stereo on", "init: fusion:"})
+    EXPECT_NE(r.output.find(step), std::string::npos) << step << "\n" << r.output;
+  const fs::path views = scene / "3_views";
+  for (const char* file : {"init.json", "sparse/points3D.ply", "dense/fused.ply", "depth/image001.npy",
+                           "depth/image010_valid.png", "depth/image019.npy"})
+    EXPECT_TRUE(fs::exists(views / file)) << file;
+  const auto m = nlohmann::json::parse(read_file(views / "init.json"));
+  for (const char* step : {"read images", "sift", "matching", "triangulation", "stereo", "fusion"})
+    EXPECT_TRUE(m["timings_s"].contains(step)) << step;
+  // d2gs train without --init: the default init is this geometry, reused (not rebuilt into MODEL/init).
+  const auto t = test::run_cli(fmt::format("train -s '{}' -m '{}' -r 8 --n-views 3 --iterations 1 --quiet",
+                                           scene.string(), (dir / "run").string()));
+  ASSERT_EQ(t.exit_code, 0) << t.output;
+  EXPECT_NE(t.output.find("reusing the training-view geometry in " + views.string()), std::string::npos) << t.output;
+  EXPECT_FALSE(fs::exists(dir / "run/init"));
+  EXPECT_EQ(read_point_cloud_ply(dir / "run/input.ply").size(), m["dense_points"].get<std::size_t>());
+  const auto cfg = nlohmann::json::parse(read_file(dir / "run/config.json"));
+  EXPECT_EQ(cfg["init"], "dense");
+  EXPECT_FALSE(cfg["init_is_oracle"].get<bool>());
+}
+
+}  // namespace
+}  // namespace d2gs
