@@ -147,9 +147,9 @@ std::string HtmlPage::str() const {
       "table{border-collapse:collapse;margin:8px 0;font-size:.92em}th,td{border:1px solid #d0d0d0;padding:3px 8px}"
       "th{background:#f2f2f2}td.num,th.num{text-align:right;font-variant-numeric:tabular-nums}\n"
       ".charts{display:flex;flex-wrap:wrap;gap:16px}.charts svg{border:1px solid #e0e0e0}\n"
-      ".views{display:flex;flex-wrap:wrap;gap:6px;align-items:flex-start}"
+      ".views{display:grid;gap:6px;align-items:start;max-width:1600px}"
       "figure{margin:0}figcaption{font-size:.85em;color:#333;text-align:center}"
-      "figure img{max-width:360px;height:auto;display:block}\n"
+      "figure img{width:100%;max-width:520px;height:auto;display:block}\n"
       ".load-error{color:#b00;font-weight:bold}\n"
       "</style>\n</head>\n<body>\n<header><h1>" +
       html_escape(title_) + "</h1>\n";

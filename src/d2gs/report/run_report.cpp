@@ -126,16 +126,24 @@ std::string views_html(const std::vector<LabeledRun>& runs, ImageEncoding encodi
   for (const auto& view : first->views) {
     if (max_views >= 0 && shown >= max_views) break;
     ++shown;
-    out += "<h3>" + html_escape(view.name) + "</h3>\n<div class=\"views\">\n";
+    // A grid: ground truth then each run's render on the first row, each error map under its render.
+    out += "<h3>" + html_escape(view.name) + "</h3>\n";
+    out += fmt::format("<div class=\"views\" style=\"grid-template-columns:repeat({},minmax(0,1fr))\">\n",
+                       runs.size() + 1);
     const Image gt = load_or_empty(view.gt);
-    if (!gt.empty())
-      out += "<figure>" + img_tag(gt, "ground truth " + view.name, encoding) + "<figcaption>ground truth</figcaption></figure>\n";
-    std::string errors;
+    out += gt.empty() ? std::string("<figure><figcaption>no ground truth</figcaption></figure>\n")
+                      : "<figure>" + img_tag(gt, "ground truth " + view.name, encoding) +
+                            "<figcaption>ground truth</figcaption></figure>\n";
+    std::string errors = "<figure></figure>\n";
     for (const auto& r : runs) {
       const TestView* match = nullptr;
       for (const auto& v : r.run->views)
         if (v.name == view.name) match = &v;
-      if (!match) continue;
+      if (!match) {
+        out += "<figure><figcaption>" + html_escape(r.label) + ": no render</figcaption></figure>\n";
+        errors += "<figure></figure>\n";
+        continue;
+      }
       const Image render = read_image(match->render);
       std::string caption = r.label;
       const auto per_view = view_metrics(r.run->results);
@@ -150,6 +158,8 @@ std::string views_html(const std::vector<LabeledRun>& runs, ImageEncoding encodi
       if (!gt.empty() && gt.width == render.width && gt.height == render.height)
         errors += "<figure>" + img_tag(error_map(render, gt), r.label + " error " + view.name, encoding) +
                   "<figcaption>" + html_escape(r.label + " error") + "</figcaption></figure>\n";
+      else
+        errors += "<figure><figcaption>no error map (no matching ground truth)</figcaption></figure>\n";
     }
     out += errors + "</div>\n";
   }

@@ -11,7 +11,7 @@
 namespace d2gs::report {
 namespace {
 
-constexpr double kLeft = 62, kRight = 16, kTop = 30, kBottom = 44;
+constexpr double kLeft = 62, kRight = 16, kTop = 30, kBottom = 44, kLegend = 140;
 
 std::string tick_label(double v) {
   const double a = std::fabs(v);
@@ -33,7 +33,7 @@ std::string frame(int width, int height, const std::string& title, const std::st
     s += fmt::format("<text x=\"14\" y=\"{0}\" text-anchor=\"middle\" transform=\"rotate(-90 14 {0})\">{1}</text>\n",
                      (kTop + height - kBottom) / 2, html_escape(y_label));
   if (!x_label.empty())
-    s += fmt::format("<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">{}</text>\n", (kLeft + width - kRight) / 2,
+    s += fmt::format("<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">{}</text>\n", (kLeft + width - kRight - kLegend) / 2,
                      height - 6, html_escape(x_label));
   return s;
 }
@@ -88,7 +88,8 @@ std::string svg_line_chart(const LineChart& chart) {
       y0 = std::min(y0, ty(se.y[i]));
       y1 = std::max(y1, ty(se.y[i]));
     }
-  const double pl = kLeft, pr = w - kRight, pt = kTop, pb = h - kBottom;
+  const bool has_legend = chart.series.size() > 1 || (chart.series.size() == 1 && !chart.series[0].name.empty());
+  const double pl = kLeft, pr = w - kRight - (has_legend ? kLegend : 0.0), pt = kTop, pb = h - kBottom;
   s += fmt::format("<rect x=\"{}\" y=\"{}\" width=\"{}\" height=\"{}\" fill=\"none\" stroke=\"#999\"/>\n", pl, pt,
                    pr - pl, pb - pt);
   if (!(x0 <= x1)) {
@@ -154,15 +155,14 @@ std::string svg_line_chart(const LineChart& chart) {
     s += fmt::format("<polyline fill=\"none\" stroke=\"{}\" stroke-width=\"1.5\" points=\"{}\"/>{}\n",
                      series_colour(k), points, dots);
   }
-  if (chart.series.size() > 1 || (chart.series.size() == 1 && !chart.series[0].name.empty()))
-    s += legend(chart.series, pr - 150, pt + 14);
+  if (has_legend) s += legend(chart.series, pr + 10, pt + 10);
   return s + "</svg>\n";
 }
 
 std::string svg_bar_chart(const BarChart& chart) {
   const int w = chart.width, h = chart.height;
   std::string s = frame(w, h, chart.title, chart.y_label, {});
-  const double pl = kLeft, pr = w - kRight, pt = kTop, pb = h - kBottom;
+  const double pl = kLeft, pr = w - kRight - (chart.series.empty() ? 0.0 : kLegend), pt = kTop, pb = h - kBottom;
   double y1 = 0;
   for (const auto& se : chart.series)
     for (double v : se.y)
@@ -194,7 +194,7 @@ std::string svg_bar_chart(const BarChart& chart) {
                        html_escape(se.name + " / " + chart.categories[g]), tick_label(se.y[g]));
     }
   }
-  if (!chart.series.empty()) s += legend(chart.series, pr - 150, pt + 14);
+  if (!chart.series.empty()) s += legend(chart.series, pr + 10, pt + 10);
   return s + "</svg>\n";
 }
 

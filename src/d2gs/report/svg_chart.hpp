@@ -16,7 +16,7 @@ struct LineChart {
   std::string title, x_label, y_label;
   std::vector<Series> series;
   bool log_y = false;  // logarithmic y axis (values ≤ 0 skipped)
-  int width = 520, height = 300;
+  int width = 600, height = 300;
 };
 
 // <svg>…</svg>. A chart without any drawable point says so inside the frame.
@@ -26,7 +26,7 @@ struct BarChart {
   std::string title, y_label;
   std::vector<std::string> categories;  // groups along x (e.g. near, middle, far)
   std::vector<Series> series;           // one bar per series in each group; y[k] is category k's value
-  int width = 520, height = 300;
+  int width = 600, height = 300;
 };
 
 std::string svg_bar_chart(const BarChart& chart);
