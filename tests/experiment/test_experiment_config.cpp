@@ -115,3 +115,23 @@ TEST(ExperimentConfig, InvalidRunConfigurationNamesTheRun) {
 
 }  // namespace
 }  // namespace d2gs::experiment
+
+namespace d2gs::experiment {
+namespace {
+
+TEST(ExperimentConfig, EveryShippedConfigLoadsAndExpands) {
+  std::size_t files = 0;
+  for (const auto& e : std::filesystem::directory_iterator(test::source_dir() / "configs/experiments")) {
+    if (e.path().extension() != ".json") continue;
+    ++files;
+    const ExperimentConfig c = load_experiment_config(e.path(), test::shared_data().string());
+    EXPECT_EQ(c.name, e.path().stem().string()) << e.path();
+    const auto runs = expand_runs(c, "/tmp/x");
+    EXPECT_EQ(runs.size(), c.scenes.size() * c.views.size() * c.methods.size() * c.seeds.size()) << e.path();
+    for (const auto& r : runs) EXPECT_EQ(r.train_config["iterations"], 10000) << e.path();
+  }
+  EXPECT_GE(files, 4u);
+}
+
+}  // namespace
+}  // namespace d2gs::experiment
