@@ -1,5 +1,8 @@
 #include "d2gs/experiment/collect.hpp"
 
+#include <algorithm>
+#include <memory>
+
 #include <fmt/format.h>
 
 #include "d2gs/core/atomic_file.hpp"

@@ -1,6 +1,9 @@
 #include "d2gs/experiment/tables.hpp"
 
+#include <algorithm>
+#include <cctype>
 #include <cmath>
+#include <tuple>
 #include <set>
 
 #include <fmt/format.h>
