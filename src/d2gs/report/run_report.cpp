@@ -67,7 +67,12 @@ std::string summary_html(const RunData& run) {
                                                            : std::string("—")},
       {"iterations", get("iterations")},
       {"seed", get("seed")},
-      {"preset", get("preset") + (get("scene_preset").empty() || get("scene_preset") == "" ? "" : " / " + get("scene_preset"))},
+      {"preset", [&] {
+         const std::string preset = get("preset") == "—" ? "" : get("preset");
+         const std::string scene = get("scene_preset") == "—" ? "" : get("scene_preset");
+         if (preset.empty() && scene.empty()) return std::string("none (the method's defaults and flags)");
+         return preset.empty() ? "scene " + scene : scene.empty() ? preset : preset + " / scene " + scene;
+       }()},
       {"initial points", get("init") + (c.is_object() && c.value("init_is_oracle", false) ? " (ORACLE: saw the test views)" : "")},
       {"final model", run.iteration >= 0 ? fmt::format("iteration {}", run.iteration) : std::string("none saved")},
   };
