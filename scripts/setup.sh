@@ -7,9 +7,9 @@ set -euo pipefail
 packages=(
   build-essential cmake ninja-build pkg-config
   libglm-dev libnanoflann-dev nlohmann-json3-dev libcli11-dev libspdlog-dev libfmt-dev
-  libomp-dev
+  libomp-dev libopenblas-dev
   libopencv-core-dev libopencv-imgproc-dev libopencv-imgcodecs-dev
-  libopencv-features2d-dev libopencv-calib3d-dev
+  libopencv-features2d-dev libopencv-calib3d-dev libopencv-dnn-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   python3 python3-numpy
   chromium

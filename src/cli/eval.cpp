@@ -1,4 +1,6 @@
 // d2gs eval: render the held-out views of a trained run and score them (method.md §6).
+#include <cstdlib>
+#include <optional>
 #include <regex>
 
 #include <nlohmann/json.hpp>
@@ -42,15 +44,29 @@ int pick_iteration(const fs::path& run, int wanted) {
 
 Run add_eval_command(CLI::App& app) {
   auto* cmd = app.add_subcommand("eval", "Render the test views of a trained run and write MODEL/results.json");
-  cmd->footer("Metrics: PSNR and SSIM per view and mean (method.md §6). Renders and ground truth go to\n"
-              "MODEL/test/ours_N/{renders,gt}/ as the original render.py writes them.");
+  cmd->footer("Metrics: PSNR, SSIM, LPIPS and AVGE per view and mean (method.md §6). Renders and ground truth go\n"
+              "to MODEL/test/ours_N/{renders,gt}/ as the original render.py writes them. LPIPS needs a weights\n"
+              "file (docs/formats.md; tools/convert_lpips_weights.py makes one from the torchvision and LPIPS\n"
+              "checkpoints); without one LPIPS is skipped and AVGE reported unavailable (null).");
   auto model_dir = std::make_shared<std::string>();
   auto iteration = std::make_shared<int>(-1);
   auto json_only = std::make_shared<bool>(false);
+  auto lpips_weights = std::make_shared<std::string>();
+  auto lpips_range = std::make_shared<std::string>("unit");
+  if (const char* env = std::getenv("D2GS_LPIPS_WEIGHTS")) *lpips_weights = env;
   cmd->add_option("-m,--model-path", *model_dir, "Run folder written by d2gs train")->required();
   cmd->add_option("--iteration", *iteration, "Model iteration to evaluate (default: the last saved)");
   cmd->add_flag("--json", *json_only, "Print the results as JSON instead of a table");
-  return [model_dir, iteration, json_only]() -> int {
+  cmd->add_option("--lpips-weights", *lpips_weights,
+                  "LPIPS weights (.safetensors, VGG16 or AlexNet; default: $D2GS_LPIPS_WEIGHTS)");
+  cmd->add_option("--lpips-input-range", *lpips_range,
+                  "Images fed to LPIPS: unit = [0,1] as the sparse-view papers, symmetric = [-1,1] as LPIPS")
+      ->capture_default_str();
+  return [model_dir, iteration, json_only, lpips_weights, lpips_range]() -> int {
+    // Options first, so that a bad weights file fails before any rendering.
+    const LpipsInputRange range = parse_lpips_input_range(*lpips_range, "--lpips-input-range");
+    std::optional<Lpips> lpips;
+    if (!lpips_weights->empty()) lpips.emplace(Lpips::load(*lpips_weights));
     const fs::path run = *model_dir;
     const fs::path cfg_path = run / "config.json";
     nlohmann::json cj;
@@ -75,6 +91,9 @@ Run add_eval_command(CLI::App& app) {
     const Gaussians model = read_gaussians_ply(run / "point_cloud" / fmt::format("iteration_{}", it) / "point_cloud.ply");
     EvalOptions eo;
     eo.render_dir = run / "test" / fmt::format("ours_{}", it);
+    eo.lpips = lpips ? &*lpips : nullptr;
+    eo.lpips_range = range;
+    eo.lpips_skipped = "no LPIPS weights given (--lpips-weights FILE or D2GS_LPIPS_WEIGHTS)";
     const EvalSummary summary = evaluate_views(model, scene, test, eo);
     nlohmann::json j;
     to_json(j, summary);
@@ -82,7 +101,6 @@ Run add_eval_command(CLI::App& app) {
     j["iteration"] = it;
     j["gaussians"] = model.size();
     j["init_is_oracle"] = oracle;
-    j["lpips"] = "skipped: no LPIPS weights (the evaluation issue adds LPIPS)";
     write_file_atomic(run / "results.json", j.dump(2));
     if (*json_only) std::printf("%s\n", j.dump(2).c_str());
     else std::printf("%s(%s, iteration %d, %zu Gaussians%s)\nwritten %s\n", format_table(summary).c_str(),

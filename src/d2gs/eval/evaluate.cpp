@@ -1,6 +1,7 @@
 #include "d2gs/eval/evaluate.hpp"
 
 #include <algorithm>
+#include <cmath>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -15,6 +16,13 @@ EvalSummary evaluate_views(const Gaussians& model, const Scene& scene, const std
                            const EvalOptions& options) {
   EvalSummary summary;
   auto rasterizer = render::make_cpu_rasterizer();
+  if (options.lpips) {
+    summary.lpips_net = options.lpips->description();
+    summary.lpips_weights = options.lpips->source().string();
+    summary.lpips_range = options.lpips_range;
+  } else {
+    summary.lpips_skipped = options.lpips_skipped;
+  }
   render::RenderOptions ro;
   ro.background = scene.background;
   ro.sh_degree = options.sh_degree;
@@ -29,6 +37,10 @@ EvalSummary evaluate_views(const Gaussians& model, const Scene& scene, const std
     m.name = cam.image_name;
     m.psnr = psnr(pred.pixels.data(), gt.pixels.data(), pred.pixels.size());
     m.ssim = ssim_metric(pred.pixels.data(), gt.pixels.data(), pred.width, pred.height, 3);
+    if (options.lpips) {
+      m.lpips = options.lpips->distance(pred, gt, options.lpips_range, "view " + cam.image_name + ", render vs ground truth").total;
+      m.avge = avge(m.psnr, m.ssim, *m.lpips);
+    }
     summary.views.push_back(m);
     if (!options.render_dir.empty()) {
       const std::string stem = std::filesystem::path(cam.image_name).stem().string();
@@ -41,23 +53,58 @@ EvalSummary evaluate_views(const Gaussians& model, const Scene& scene, const std
     summary.ssim += m.ssim;
   }
   if (!summary.views.empty()) {
-    summary.psnr /= static_cast<double>(summary.views.size());
-    summary.ssim /= static_cast<double>(summary.views.size());
+    const auto n = static_cast<double>(summary.views.size());
+    summary.psnr /= n;
+    summary.ssim /= n;
+    if (options.lpips) {
+      double l = 0, a = 0;
+      for (const auto& m : summary.views) l += *m.lpips, a += *m.avge;
+      summary.lpips = l / n;
+      summary.avge = a / n;
+    }
   }
   return summary;
 }
 
+double avge(double psnr, double ssim, double lpips) {
+  const double mse = std::pow(10.0, -psnr / 10.0);
+  return std::cbrt(mse * std::sqrt(std::max(0.0, 1.0 - ssim)) * lpips);
+}
+
+namespace {
+nlohmann::json value_or_null(const std::optional<double>& v) { return v ? nlohmann::json(*v) : nlohmann::json(nullptr); }
+std::string cell(const std::optional<double>& v) { return v ? fmt::format("{:>8.4f}", *v) : fmt::format("{:>8}", "-"); }
+}  // namespace
+
 void to_json(nlohmann::json& j, const EvalSummary& s) {
   j = nlohmann::json::object();
-  j["mean"] = {{"PSNR", s.psnr}, {"SSIM", s.ssim}};
+  j["mean"] = {{"PSNR", s.psnr}, {"SSIM", s.ssim}, {"LPIPS", value_or_null(s.lpips)}, {"AVGE", value_or_null(s.avge)}};
   auto& per = j["per_view"] = nlohmann::json::object();
-  for (const auto& v : s.views) per[v.name] = {{"index", v.index}, {"PSNR", v.psnr}, {"SSIM", v.ssim}};
+  for (const auto& v : s.views)
+    per[v.name] = {{"index", v.index}, {"PSNR", v.psnr}, {"SSIM", v.ssim}, {"LPIPS", value_or_null(v.lpips)},
+                   {"AVGE", value_or_null(v.avge)}};
+  if (s.lpips_skipped.empty())
+    j["lpips"] = {{"status", "computed"},
+                  {"net", s.lpips_net},
+                  {"weights", s.lpips_weights},
+                  {"input_range", to_string(s.lpips_range)},
+                  {"input", fmt::format("images fed in {} ({})", range_label(s.lpips_range),
+                                        s.lpips_range == LpipsInputRange::unit ? "as the sparse-view papers"
+                                                                              : "the official LPIPS convention")}};
+  else
+    j["lpips"] = {{"status", "skipped"}, {"reason", s.lpips_skipped}};
 }
 
 std::string format_table(const EvalSummary& s) {
-  std::string out = fmt::format("{:<24} {:>8} {:>8}\n", "view", "PSNR", "SSIM");
-  for (const auto& v : s.views) out += fmt::format("{:<24} {:>8.3f} {:>8.4f}\n", v.name, v.psnr, v.ssim);
-  out += fmt::format("{:<24} {:>8.3f} {:>8.4f}\n", "mean", s.psnr, s.ssim);
+  std::string out = fmt::format("{:<24} {:>8} {:>8} {:>8} {:>8}\n", "view", "PSNR", "SSIM", "LPIPS", "AVGE");
+  for (const auto& v : s.views)
+    out += fmt::format("{:<24} {:>8.3f} {:>8.4f} {} {}\n", v.name, v.psnr, v.ssim, cell(v.lpips), cell(v.avge));
+  out += fmt::format("{:<24} {:>8.3f} {:>8.4f} {} {}\n", "mean", s.psnr, s.ssim, cell(s.lpips), cell(s.avge));
+  if (s.lpips_skipped.empty())
+    out += fmt::format("LPIPS: {}, input {} ({}), weights {}\n", s.lpips_net, range_label(s.lpips_range),
+                       to_string(s.lpips_range), s.lpips_weights);
+  else
+    out += fmt::format("LPIPS skipped: {}; AVGE unavailable\n", s.lpips_skipped);
   return out;
 }
 

@@ -11,7 +11,7 @@
 #include <fmt/format.h>
 
 #include "d2gs/core/error.hpp"
-#include "d2gs/eval/vector_clones.hpp"
+#include "d2gs/core/vector_clones.hpp"
 
 namespace d2gs {
 

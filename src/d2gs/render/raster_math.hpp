@@ -75,4 +75,21 @@ D2GS_HD bool alpha_pixel_box(T mx, T my, const T conic[3], T opacity, T alpha_mi
   return true;
 }
 
+// The pixel columns of one row that a Gaussian can reach with alpha >= the cutoff: the x with
+// q(mx - x, dy) <= reach (reach = 2 ln(opacity / cutoff), dy = my - row, inv_qa = 1 / qa), i.e. the chord
+// of the ellipse through the row, widened for rounding (reach by 1e-3 relative, the ends by one pixel)
+// so that skipping the columns outside [x_lo, x_hi] never changes a result. Returns false when the row
+// misses the ellipse.
+template <typename T>
+D2GS_HD bool alpha_row_span(T mx, T dy, T qa, T qb, T qc, T reach, T inv_qa, T& x_lo, T& x_hi) {
+  const T r = reach * T(1.001) + T(1e-4);
+  const T disc = qa * r - dy * dy * (qa * qc - qb * qb);  // qa^2 (half chord)^2
+  if (!(disc >= T(0))) return false;
+  const T half = hd_sqrt(disc) * inv_qa;
+  const T centre = mx + qb * dy * inv_qa;  // x of the chord's midpoint: dx = -qb dy / qa
+  x_lo = centre - half - T(1);
+  x_hi = centre + half + T(1);
+  return true;
+}
+
 }  // namespace d2gs::render

@@ -136,6 +136,8 @@ void bin_gaussians(const Projected<T>& proj, int width, int height, double alpha
     s.x1 = box[1];
     s.y0 = box[2];
     s.y1 = box[3];
+    s.reach = T(2) * hd_log(s.opacity / amin);
+    s.inv_qa = T(1) / s.qa;
     const int* rect = &out.rect[i * 4];
     out.rank_isect_offsets[r + 1] = (rect[2] - rect[0]) * (rect[3] - rect[1]);
   }

@@ -1,20 +1,16 @@
 #pragma once
 // Stage 4: alpha compositing per 16x16 tile (raster_math.hpp), forward and backward.
 //
-// Parallel over tiles (OpenMP). Inside a tile the 256 pixels are SIMD lanes in structure-of-arrays
-// buffers on the stack; for each Gaussian of the tile list only the pixel rows of its alpha box are
-// visited, and each row is a fixed 16-lane loop with masks instead of branches. Rows (and the tile)
-// whose pixels are all done are skipped.
+// Parallel over tiles (OpenMP); the per-tile loops are in composite_tiles.ipp, built once per x86-64
+// level and picked at run time (composite_tiles.hpp).
 //
 // Backward: per tile, back to front, each intersection's partial gradients (mean2d 2, conic 3,
 // opacity, colour 3, depth) are summed over the tile's pixels in a fixed order and written to an
 // intersection-indexed buffer; then every Gaussian sums its intersections in tile order. No atomics,
 // so results are bit-identical whatever the number of threads.
-#include "d2gs/render/cpu/types.hpp"
+#include "d2gs/render/cpu/composite_tiles.hpp"
 
 namespace d2gs::render::cpu {
-
-inline constexpr int kIsectGradStride = 10;  // mean2d(2) conic(3) opacity colour(3) depth
 
 // rgb: H x W x 3 (interleaved, not clamped; background added with the final transmittance),
 // alpha = 1 - T_final, depth = sum_i alpha_i T_i z_i. Any of the three outputs may be null.

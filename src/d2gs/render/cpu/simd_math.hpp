@@ -1,44 +1,31 @@
 #pragma once
-// Branch-free math for the CPU tile loops: written so that GCC/Clang vectorise loops that call it
-// (baseline SSE2 included), which the libm functions prevent without -ffast-math.
+// Branch-free math for the CPU tile loops, on GCC/Clang vector extensions.
+//
+// Included only by the compositing tile kernels (composite_tiles.ipp), which are compiled once per
+// x86-64 level (composite_tiles_*.cpp). Every definition here lives in the namespace named by
+// D2GS_TILE_ISA, so the copies built for different instruction sets never meet at link time.
 #include <bit>
 #include <cmath>
 #include <cstdint>
 
-// Only the CPU tile loops include this header. Passing the 64/128-byte row vectors between (inlined,
-// internal) functions makes GCC note that the ABI would differ with AVX-512 enabled; nothing here has
-// external linkage across translation units built with different flags, so the note is silenced.
+#if defined(__AVX512F__) || defined(__FMA__)
+#include <immintrin.h>
+#endif
+
+#ifndef D2GS_TILE_ISA
+#error "simd_math.hpp belongs to the tile kernels: define D2GS_TILE_ISA (see composite_tiles.ipp)"
+#endif
+
+// Passing the 32/64-byte row vectors between (inlined, internal) functions makes GCC note that the ABI
+// would differ with another -march; nothing here has linkage across translation units, so the note is
+// silenced.
 #pragma GCC diagnostic ignored "-Wpsabi"
 
-namespace d2gs::render::cpu {
+namespace d2gs::render::cpu::D2GS_TILE_ISA {
 
-// exp(x) for x <= 0 in float, about 1 ulp (Cephes-style range reduction x = n ln2 + r with a degree-6
-// polynomial). Inputs below -80 return exp(-80) (~1.8e-35): callers multiply by an opacity >= 1/255 and
-// compare with 1/255, so the result is "0" for them, and products stay far from the denormal range
-// (denormal operands cost ~100 cycles each and made the tile loops 20x slower).
-inline float exp_lanes(float x) {
-  x = x < -80.0f ? -80.0f : x;
-  x = x > 88.0f ? 88.0f : x;
-  constexpr float kRound = 12582912.0f;  // 1.5 * 2^23: adding and subtracting rounds to an integer
-  const float n = (x * 1.44269504088896341f + kRound) - kRound;
-  float r = x - n * 0.693359375f;
-  r = r - n * -2.12194440e-4f;
-  const float r2 = r * r;
-  float p = 1.9875691500e-4f;
-  p = p * r + 1.3981999507e-3f;
-  p = p * r + 8.3334519073e-3f;
-  p = p * r + 4.1665795894e-2f;
-  p = p * r + 1.6666665459e-1f;
-  p = p * r + 5.0000001201e-1f;
-  const float y = p * r2 + r + 1.0f;
-  const std::int32_t bits = (static_cast<std::int32_t>(n) + 127) << 23;
-  return y * std::bit_cast<float>(bits);
-}
-inline double exp_lanes(double x) { return std::exp(x); }
-
-// A SIMD vector of the widest width the target has (16 bytes on the SSE2 baseline, 32 with AVX, 64 with
-// AVX-512 under -march=native): a tile row of 16 pixels is kChunks such vectors. GCC/Clang vector
-// extensions; wider-than-native vectors would be split into scalar code by GCC, so they are avoided.
+// A SIMD vector of the widest width the target has (16 bytes on the SSE2 baseline, 32 with AVX2, 64
+// with AVX-512): a tile row of 16 pixels is 16 / kLanes such vectors. Wider-than-native vectors would
+// be split into scalar code by GCC, so they are avoided.
 #if defined(__AVX512F__)
 inline constexpr int kVectorBytes = 64;
 #elif defined(__AVX__)
@@ -61,30 +48,105 @@ struct Row<double> {
   static constexpr int kLanes = kVectorBytes / 8;
 };
 
-// exp of every lane, the lane-wise exp_lanes above (same polynomial for float, std::exp for double).
-inline Row<float>::V exp_row(Row<float>::V x) {
+#define D2GS_TILE_INLINE inline __attribute__((always_inline))
+
+// a * b + c. The tile translation units are compiled with -ffp-contract=off so that the forward and
+// the backward kernel evaluate alpha with bit-identical roundings (the backward replays the forward's
+// decisions); fused operations are asked for here, explicitly, where the target has them.
+D2GS_TILE_INLINE Row<float>::V fmadd(Row<float>::V a, Row<float>::V b, Row<float>::V c) {
+#if defined(__AVX512F__)
+  return _mm512_fmadd_ps(a, b, c);
+#elif defined(__FMA__)
+  return _mm256_fmadd_ps(a, b, c);
+#else
+  return a * b + c;
+#endif
+}
+D2GS_TILE_INLINE Row<double>::V fmadd(Row<double>::V a, Row<double>::V b, Row<double>::V c) {
+#if defined(__AVX512F__)
+  return _mm512_fmadd_pd(a, b, c);
+#elif defined(__FMA__)
+  return _mm256_fmadd_pd(a, b, c);
+#else
+  return a * b + c;
+#endif
+}
+
+// exp of every lane for x <= 0 in float, about 1 ulp (Cephes-style range reduction x = n ln2 + r with a
+// degree-6 polynomial). Inputs below -80 return exp(-80) (~1.8e-35): callers multiply by an opacity
+// >= 1/255 and compare with 1/255, so the result is "0" for them, and products stay far from the
+// denormal range (denormal operands cost ~100 cycles each and made the tile loops 20x slower).
+D2GS_TILE_INLINE Row<float>::V exp_row(Row<float>::V x) {
   using V = Row<float>::V;
   using M = Row<float>::M;
   x = x < -80.0f ? V{} - 80.0f : x;
   x = x > 88.0f ? V{} + 88.0f : x;
-  constexpr float kRound = 12582912.0f;
-  const V n = (x * 1.44269504088896341f + kRound) - kRound;
-  V r = x - n * 0.693359375f;
-  r = r - n * -2.12194440e-4f;
+  constexpr float kRound = 12582912.0f;  // 1.5 * 2^23: adding and subtracting rounds to an integer
+  const V n = fmadd(x, V{} + 1.44269504088896341f, V{} + kRound) - kRound;
+  V r = fmadd(n, V{} - 0.693359375f, x);
+  r = fmadd(n, V{} + 2.12194440e-4f, r);
   const V r2 = r * r;
   V p = V{} + 1.9875691500e-4f;
-  p = p * r + 1.3981999507e-3f;
-  p = p * r + 8.3334519073e-3f;
-  p = p * r + 4.1665795894e-2f;
-  p = p * r + 1.6666665459e-1f;
-  p = p * r + 5.0000001201e-1f;
-  const V y = p * r2 + r + 1.0f;
+  p = fmadd(p, r, V{} + 1.3981999507e-3f);
+  p = fmadd(p, r, V{} + 8.3334519073e-3f);
+  p = fmadd(p, r, V{} + 4.1665795894e-2f);
+  p = fmadd(p, r, V{} + 1.6666665459e-1f);
+  p = fmadd(p, r, V{} + 5.0000001201e-1f);
+  const V y = fmadd(p, r2, r) + 1.0f;
   const M bits = (__builtin_convertvector(n, M) + 127) << 23;
   return y * std::bit_cast<V>(bits);
 }
-inline Row<double>::V exp_row(Row<double>::V x) {
+D2GS_TILE_INLINE Row<double>::V exp_row(Row<double>::V x) {
   for (int k = 0; k < Row<double>::kLanes; ++k) x[k] = std::exp(x[k]);
   return x;
 }
 
-}  // namespace d2gs::render::cpu
+// True when any lane of the mask is set.
+template <typename M>
+D2GS_TILE_INLINE bool any_lane(M m) {
+#if defined(__AVX512F__)
+  if constexpr (sizeof(M) == 64 && sizeof(m[0]) == 4) return _mm512_test_epi32_mask((__m512i)m, (__m512i)m) != 0;
+#endif
+  std::int64_t acc = 0;
+  for (int k = 0; k < int(sizeof(M) / sizeof(m[0])); ++k) acc |= m[k];
+  return acc != 0;
+}
+
+// Number of set lanes (lanes are 0 or -1).
+template <typename M>
+D2GS_TILE_INLINE int count_lanes(M m) {
+#if defined(__AVX512F__)
+  if constexpr (sizeof(M) == 64 && sizeof(m[0]) == 4) return __builtin_popcount(_mm512_test_epi32_mask((__m512i)m, (__m512i)m));
+#endif
+  int n = 0;
+  for (int k = 0; k < int(sizeof(M) / sizeof(m[0])); ++k) n -= int(m[k]);
+  return n;
+}
+
+// Sum of the lanes in a fixed pairwise order (halves added until one lane is left): the same order on
+// every call, so gradients are reproducible.
+template <typename V>
+D2GS_TILE_INLINE auto sum_lanes(V v) {
+  constexpr int L = int(sizeof(V) / sizeof(v[0]));
+  if constexpr (L == 16) {
+    typedef decltype(v[0] + 0) S;
+    typedef S H __attribute__((vector_size(sizeof(V) / 2)));
+    const H lo = __builtin_shufflevector(v, v, 0, 1, 2, 3, 4, 5, 6, 7);
+    const H hi = __builtin_shufflevector(v, v, 8, 9, 10, 11, 12, 13, 14, 15);
+    return sum_lanes(lo + hi);
+  } else if constexpr (L == 8) {
+    typedef decltype(v[0] + 0) S;
+    typedef S H __attribute__((vector_size(sizeof(V) / 2)));
+    const H lo = __builtin_shufflevector(v, v, 0, 1, 2, 3);
+    const H hi = __builtin_shufflevector(v, v, 4, 5, 6, 7);
+    return sum_lanes(lo + hi);
+  } else if constexpr (L == 4) {
+    return (v[0] + v[2]) + (v[1] + v[3]);
+  } else if constexpr (L == 2) {
+    return v[0] + v[1];
+  } else {
+    return v[0];
+  }
+}
+
+}  // namespace d2gs::render::cpu::D2GS_TILE_ISA

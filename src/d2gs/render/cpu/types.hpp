@@ -79,9 +79,12 @@ struct ProjectedGrads {
 
 // What a tile's inner loop needs of one Gaussian, packed in depth order (one cache line in float).
 template <typename T>
-struct Splat {
+struct alignas(64) Splat {
   T mx, my, qa, qb, qc, opacity, r, g, b, z;
   int x0, x1, y0, y1;  // inclusive pixel box outside which alpha < the cutoff (raster_math.hpp)
+  // alpha >= the cutoff needs d^T Q d <= reach = 2 ln(opacity / cutoff); inv_qa = 1 / Q00. The tile
+  // loops use them to bound every pixel row to the ellipse's own x-extent (alpha_row_span).
+  T reach, inv_qa;
 };
 
 // Tile lists: the intersections of every tile, front to back, and for every Gaussian its

@@ -1,0 +1,368 @@
+// The tile loops of alpha compositing (raster_math.hpp), forward and backward. Not a header: each
+// composite_tiles_<level>.cpp defines D2GS_TILE_ISA (the namespace, e.g. avx2) and includes this file
+// once, compiled for its x86-64 level (see composite_tiles.hpp and src/d2gs/render/CMakeLists.txt).
+//
+// Inside a tile the 256 pixels are SIMD lanes in structure-of-arrays buffers on the stack; for each
+// Gaussian of the tile list only the pixel rows (and row vectors) of its alpha box are visited, with
+// masks instead of branches inside a row vector. Rows, and the tile, whose pixels are all done are
+// skipped. The forward and the backward kernel evaluate alpha through the same function, and the
+// translation units are compiled with -ffp-contract=off, so the backward replays exactly the forward's
+// per-pixel decisions.
+#include <algorithm>
+
+#include "d2gs/render/cpu/composite_tiles.hpp"
+#include "d2gs/render/cpu/simd_math.hpp"
+#include "d2gs/render/raster_math.hpp"
+
+namespace d2gs::render::cpu::D2GS_TILE_ISA {
+
+namespace {
+
+constexpr int S = kTileSize;  // pixels per tile row
+
+template <typename T>
+struct SmoothConstants {
+  static constexpr T alpha_lo = T(kSmoothAlphaLo);
+  static constexpr T inv_alpha_range = T(1.0 / (kSmoothAlphaHi - kSmoothAlphaLo));
+  static constexpr T power_lo = T(kSmoothPowerLo);
+  static constexpr T inv_power_range = T(1.0 / (kSmoothPowerHi - kSmoothPowerLo));
+};
+
+// Lane-wise helpers on tile rows.
+template <typename V>
+D2GS_TILE_INLINE V smoothstep_row(V e) {
+  e = e < 0 ? V{} : e;
+  e = e > 1 ? V{} + 1 : e;
+  return e * e * (3 - 2 * e);
+}
+template <typename V>
+D2GS_TILE_INLINE V smoothstep_grad_row(V e) {
+  return (e <= 0) | (e >= 1) ? V{} : 6 * e * (1 - e);
+}
+
+// What one Gaussian contributes to a tile, precomputed once per (Gaussian, tile): the pixel rows its
+// alpha box reaches, and per row vector dx = mean_x - x and -1/2 qa dx^2.
+template <typename T>
+struct SplatInTile {
+  using V = typename Row<T>::V;
+  static constexpr int C = S / Row<T>::kLanes;  // vectors per tile row
+  int y_lo, y_hi;
+  V dx[C], hx[C];
+  D2GS_TILE_INLINE void init(const Splat<T>& s, int px0, int py0, int nrows, const V xs[C]) {
+    y_lo = std::max(s.y0 - py0, 0);
+    y_hi = std::min(s.y1 - py0, nrows - 1);
+    (void)px0;
+    for (int c = 0; c < C; ++c) {
+      dx[c] = s.mx - xs[c];
+      hx[c] = (T(-0.5) * s.qa) * dx[c] * dx[c];
+    }
+  }
+};
+
+// The row vectors [c0, c1] of a tile row (pixel x from px0, offset dy = my - y) that hold pixels the
+// Gaussian can reach (raster_math.hpp, alpha_row_span); false when there are none.
+template <typename T>
+D2GS_TILE_INLINE bool row_vectors(const Splat<T>& s, T dy, int px0, int& c0, int& c1) {
+  constexpr int VL = Row<T>::kLanes;
+  T x_lo, x_hi;
+  if (!alpha_row_span(s.mx, dy, s.qa, s.qb, s.qc, s.reach, s.inv_qa, x_lo, x_hi)) return false;
+  // Clamp in floating point to just outside the tile before converting (means may be far off-screen).
+  x_lo = std::max(x_lo, T(px0 - 1));
+  x_hi = std::min(x_hi, T(px0 + S));
+  const int a = std::max(int(hd_ceil(x_lo)), px0) - px0;
+  const int b = std::min(int(hd_floor(x_hi)), px0 + S - 1) - px0;
+  if (a > b) return false;
+  c0 = a / VL;
+  c1 = b / VL;
+  return true;
+}
+
+// power = -1/2 d^T Q d for one row vector, as -1/2 qa dx^2 (per column) + (-1/2 qc dy^2 - qb dy dx) (per
+// row): the one formula both passes use.
+template <typename V, typename T>
+D2GS_TILE_INLINE V row_power(V hx, V dx, T hy, T by) {
+  return fmadd(V{} + by, dx, hx + hy);
+}
+
+// The splats of a tile list are scattered over the depth-sorted array (a cache miss each): fetch the
+// one kPrefetch entries ahead while the current one is composited.
+constexpr int kPrefetch = 8;
+template <typename T>
+D2GS_TILE_INLINE void prefetch_splat(const Binning<T>& bin, int j) {
+  const Splat<T>* p = &bin.splats[bin.isect_rank[j]];
+  __builtin_prefetch(p);
+  if constexpr (sizeof(Splat<T>) > 64) __builtin_prefetch(reinterpret_cast<const char*>(p) + 64);
+}
+
+template <typename T, bool Smooth>
+void forward_tile(const Binning<T>& bin, int tile, const T bg[3], T* rgb, T* alpha_out, T* depth_out,
+                  PixelState<T>& state) {
+  using V = typename Row<T>::V;
+  using M = typename Row<T>::M;
+  constexpr int VL = Row<T>::kLanes, C = S / VL;  // lanes per vector, vectors per tile row
+  V Tr[S * C], cr[S * C], cg[S * C], cb[S * C], cd[S * C];
+  M last[S * C], done[S * C];
+  int row_alive[S];
+  const int W = bin.width, H = bin.height;
+  const int px0 = (tile % bin.tiles_x) * S, py0 = (tile / bin.tiles_x) * S;
+  const int nrows = std::min(S, H - py0), ncols = std::min(S, W - px0);
+  V xs[C];
+  M outside_cols[C];
+  for (int x = 0; x < S; ++x) {
+    xs[x / VL][x % VL] = T(px0 + x);
+    outside_cols[x / VL][x % VL] = x < ncols ? 0 : -1;
+  }
+  int alive = 0;
+  for (int y = 0; y < S; ++y) {
+    for (int c = 0; c < C; ++c) {
+      const int k = y * C + c;
+      Tr[k] = V{} + T(1);
+      cr[k] = cg[k] = cb[k] = cd[k] = V{};
+      last[k] = M{};
+      done[k] = y < nrows ? outside_cols[c] : M{} - 1;
+    }
+    row_alive[y] = y < nrows ? ncols : 0;
+    alive += row_alive[y];
+  }
+  const int begin = bin.tile_offsets[tile], end = bin.tile_offsets[tile + 1];
+  SplatInTile<T> st;
+  for (int j = begin; j < std::min(end, begin + kPrefetch); ++j) prefetch_splat(bin, j);
+  for (int j = begin; j < end && alive > 0; ++j) {
+    if (j + kPrefetch < end) prefetch_splat(bin, j + kPrefetch);
+    const Splat<T>& s = bin.splats[bin.isect_rank[j]];
+    st.init(s, px0, py0, nrows, xs);
+    const M jl = M{} + (j - begin + 1);
+    const T qb = s.qb, qc = s.qc, o = s.opacity;
+    const T sr = s.r, sg = s.g, sb = s.b, sz = s.z;
+    for (int y = st.y_lo; y <= st.y_hi; ++y) {
+      if (row_alive[y] == 0) continue;
+      const T dy = s.my - T(py0 + y);
+      int c0, c1;
+      if (!row_vectors(s, dy, px0, c0, c1)) continue;
+      const T hy = (T(-0.5) * qc) * dy * dy, by = -qb * dy;
+      int stopped_in_row = 0;
+      for (int c = c0; c <= c1; ++c) {
+        const int k = y * C + c;
+        const V power = row_power(st.hx[c], st.dx[c], hy, by);
+        const V og = o * exp_row(power);
+        V alpha = og < T(kAlphaMax) ? og : V{} + T(kAlphaMax);
+        M ok;
+        if constexpr (Smooth) {
+          using K = SmoothConstants<T>;
+          alpha = alpha * smoothstep_row((alpha - K::alpha_lo) * K::inv_alpha_range) *
+                  smoothstep_row((power - K::power_lo) * K::inv_power_range);
+          ok = (power <= T(0)) & (alpha > T(0)) & ~done[k];
+        } else {
+          ok = (power <= T(0)) & (alpha >= T(kAlphaMin)) & ~done[k];
+        }
+        const V t_cur = Tr[k];
+        const V t_next = t_cur * (T(1) - alpha);
+        M stop{};
+        if constexpr (!Smooth) stop = ok & (t_next < T(kTransmittanceMin));
+        const M comp = ok & ~stop;
+        const V w = comp ? alpha * t_cur : V{};
+        cr[k] = fmadd(w, V{} + sr, cr[k]);
+        cg[k] = fmadd(w, V{} + sg, cg[k]);
+        cb[k] = fmadd(w, V{} + sb, cb[k]);
+        cd[k] = fmadd(w, V{} + sz, cd[k]);
+        Tr[k] = comp ? t_next : t_cur;
+        last[k] = comp ? jl : last[k];
+        if constexpr (!Smooth) {
+          if (any_lane(stop)) {  // some pixels are done: they leave the row's and the tile's count
+            done[k] |= stop;
+            stopped_in_row += count_lanes(stop);
+          }
+        }
+      }
+      row_alive[y] -= stopped_in_row;
+      alive -= stopped_in_row;
+    }
+  }
+  for (int y = 0; y < nrows; ++y)
+    for (int x = 0; x < ncols; ++x) {
+      const std::size_t p = static_cast<std::size_t>(py0 + y) * W + (px0 + x);
+      const int k = y * C + x / VL, l = x % VL;
+      const T t = Tr[k][l];
+      if (rgb) {
+        rgb[p * 3 + 0] = cr[k][l] + t * bg[0];
+        rgb[p * 3 + 1] = cg[k][l] + t * bg[1];
+        rgb[p * 3 + 2] = cb[k][l] + t * bg[2];
+      }
+      if (alpha_out) alpha_out[p] = T(1) - t;
+      if (depth_out) depth_out[p] = cd[k][l];
+      state.final_transmittance[p] = t;
+      state.n_contrib[p] = static_cast<int>(last[k][l]);
+    }
+}
+
+template <typename T, bool Smooth>
+void backward_tile(const Binning<T>& bin, int tile, const T bg[3], const PixelState<T>& state, const T* d_rgb,
+                   const T* d_alpha, const T* d_depth, T* isect_grads) {
+  using V = typename Row<T>::V;
+  using M = typename Row<T>::M;
+  constexpr int VL = Row<T>::kLanes, C = S / VL;
+  V Tc[S * C], ar[S * C], ag[S * C], ab[S * C], ad[S * C], gr[S * C], gg[S * C], gb[S * C], gd[S * C], tgb[S * C];
+  M last[S * C];
+  int row_max[S];
+  const int W = bin.width, H = bin.height;
+  const int px0 = (tile % bin.tiles_x) * S, py0 = (tile / bin.tiles_x) * S;
+  const int nrows = std::min(S, H - py0), ncols = std::min(S, W - px0);
+  V xs[C];
+  for (int x = 0; x < S; ++x) xs[x / VL][x % VL] = T(px0 + x);
+  int tile_max = 0;
+  for (int y = 0; y < S; ++y) {
+    for (int c = 0; c < C; ++c) {
+      const int k = y * C + c;
+      Tc[k] = ar[k] = ag[k] = ab[k] = ad[k] = V{};
+      gr[k] = gg[k] = gb[k] = gd[k] = tgb[k] = V{};
+      last[k] = M{};
+    }
+    row_max[y] = 0;
+    if (y >= nrows) continue;
+    for (int x = 0; x < ncols; ++x) {
+      const std::size_t p = static_cast<std::size_t>(py0 + y) * W + (px0 + x);
+      const int k = y * C + x / VL, l = x % VL;
+      Tc[k][l] = state.final_transmittance[p];
+      last[k][l] = state.n_contrib[p];
+      if (d_rgb) {
+        gr[k][l] = d_rgb[p * 3 + 0];
+        gg[k][l] = d_rgb[p * 3 + 1];
+        gb[k][l] = d_rgb[p * 3 + 2];
+      }
+      if (d_depth) gd[k][l] = d_depth[p];
+      const T ga = d_alpha ? d_alpha[p] : T(0);
+      // d out / d alpha_i through T_final: T_final / (1 - alpha_i) * (d_alpha - bg . d_rgb).
+      tgb[k][l] = Tc[k][l] * (ga - (bg[0] * gr[k][l] + bg[1] * gg[k][l] + bg[2] * gb[k][l]));
+      row_max[y] = std::max(row_max[y], state.n_contrib[p]);
+    }
+    tile_max = std::max(tile_max, row_max[y]);
+  }
+  const int begin = bin.tile_offsets[tile];
+  SplatInTile<T> st;
+  for (int jl = tile_max - 1; jl >= std::max(0, tile_max - kPrefetch); --jl) prefetch_splat(bin, begin + jl);
+  for (int jl = tile_max - 1; jl >= 0; --jl) {
+    if (jl - kPrefetch >= 0) prefetch_splat(bin, begin + jl - kPrefetch);
+    const Splat<T>& s = bin.splats[bin.isect_rank[begin + jl]];
+    st.init(s, px0, py0, nrows, xs);
+    const T qa = s.qa, qb = s.qb, qc = s.qc, o = s.opacity;
+    const T sr = s.r, sg = s.g, sb = s.b, sz = s.z;
+    const M jlv = M{} + jl;
+    V v_mx{}, v_my{}, v_qa{}, v_qb{}, v_qc{}, v_o{}, v_r{}, v_g{}, v_b{}, v_z{};
+    for (int y = st.y_lo; y <= st.y_hi; ++y) {
+      if (row_max[y] <= jl) continue;
+      const T dy = s.my - T(py0 + y);
+      int c0, c1;
+      if (!row_vectors(s, dy, px0, c0, c1)) continue;
+      const T hy = (T(-0.5) * qc) * dy * dy, by = -qb * dy;
+      for (int c = c0; c <= c1; ++c) {
+        const int k = y * C + c;
+        const V dx = st.dx[c];
+        const V power = row_power(st.hx[c], dx, hy, by);
+        const V G = exp_row(power);
+        const V og = o * G;
+        const V alpha_raw = og < T(kAlphaMax) ? og : V{} + T(kAlphaMax);
+        V alpha = alpha_raw;
+        V d_alpha_raw_scale = V{} + T(1), d_power_extra_scale{};
+        M ok;
+        if constexpr (Smooth) {
+          using K = SmoothConstants<T>;
+          const V ea = (alpha_raw - K::alpha_lo) * K::inv_alpha_range;
+          const V ep = (power - K::power_lo) * K::inv_power_range;
+          const V sa = smoothstep_row(ea), sp = smoothstep_row(ep);
+          alpha = alpha_raw * sa * sp;
+          d_alpha_raw_scale = (sa + alpha_raw * smoothstep_grad_row(ea) * K::inv_alpha_range) * sp;
+          d_power_extra_scale = alpha_raw * sa * smoothstep_grad_row(ep) * K::inv_power_range;
+          ok = (power <= T(0)) & (alpha > T(0)) & (jlv < last[k]);
+        } else {
+          ok = (power <= T(0)) & (alpha >= T(kAlphaMin)) & (jlv < last[k]);
+        }
+        if (!any_lane(ok)) continue;
+        const V one_m = T(1) - alpha;
+        const V inv_one_m = T(1) / one_m;
+        const V t_before = Tc[k] * inv_one_m;
+        const V w = alpha * t_before;
+        const V g_alpha = fmadd(
+            t_before,
+            fmadd(sr - ar[k], gr[k], fmadd(sg - ag[k], gg[k], fmadd(sb - ab[k], gb[k], (sz - ad[k]) * gd[k]))),
+            tgb[k] * inv_one_m);
+        ar[k] = ok ? fmadd(alpha, V{} + sr, one_m * ar[k]) : ar[k];
+        ag[k] = ok ? fmadd(alpha, V{} + sg, one_m * ag[k]) : ag[k];
+        ab[k] = ok ? fmadd(alpha, V{} + sb, one_m * ab[k]) : ab[k];
+        ad[k] = ok ? fmadd(alpha, V{} + sz, one_m * ad[k]) : ad[k];
+        Tc[k] = ok ? t_before : Tc[k];
+        const V wk = ok ? w : V{};
+        v_r = fmadd(wk, gr[k], v_r);
+        v_g = fmadd(wk, gg[k], v_g);
+        v_b = fmadd(wk, gb[k], v_b);
+        v_z = fmadd(wk, gd[k], v_z);
+        // alpha_raw = min(0.99, o G): no gradient through the clamp.
+        const V d_og = ok & (og < T(kAlphaMax)) ? g_alpha * d_alpha_raw_scale : V{};
+        V d_pow = d_og * og;
+        if constexpr (Smooth) d_pow += ok ? g_alpha * d_power_extra_scale : V{};
+        v_o = fmadd(d_og, G, v_o);
+        const V d_pow_dx = d_pow * dx;
+        v_mx -= d_pow * (qa * dx + qb * dy);
+        v_my -= d_pow * (qb * dx + qc * dy);
+        v_qa = fmadd(V{} + T(-0.5) * dx, d_pow_dx, v_qa);
+        v_qb = fmadd(V{} - dy, d_pow_dx, v_qb);
+        v_qc = fmadd(V{} + T(-0.5) * (dy * dy), d_pow, v_qc);
+      }
+    }
+    // Lane sums in a fixed order.
+    T* out = isect_grads + static_cast<std::size_t>(begin + jl) * kIsectGradStride;
+    out[0] = sum_lanes(v_mx);
+    out[1] = sum_lanes(v_my);
+    out[2] = sum_lanes(v_qa);
+    out[3] = sum_lanes(v_qb);
+    out[4] = sum_lanes(v_qc);
+    out[5] = sum_lanes(v_o);
+    out[6] = sum_lanes(v_r);
+    out[7] = sum_lanes(v_g);
+    out[8] = sum_lanes(v_b);
+    out[9] = sum_lanes(v_z);
+  }
+  // Intersections past the tile's last contributor get no gradient.
+  const int count = bin.tile_offsets[tile + 1] - begin;
+  for (int jl = tile_max; jl < count; ++jl) {
+    T* out = isect_grads + static_cast<std::size_t>(begin + jl) * kIsectGradStride;
+    for (int k = 0; k < kIsectGradStride; ++k) out[k] = T(0);
+  }
+}
+
+template <typename T>
+void forward_entry(const Binning<T>& bin, int tile, const T background[3], bool smooth_cutoff, T* rgb, T* alpha,
+                   T* depth, PixelState<T>& state) {
+  if (smooth_cutoff)
+    forward_tile<T, true>(bin, tile, background, rgb, alpha, depth, state);
+  else
+    forward_tile<T, false>(bin, tile, background, rgb, alpha, depth, state);
+}
+
+template <typename T>
+void backward_entry(const Binning<T>& bin, int tile, const T background[3], bool smooth_cutoff,
+                    const PixelState<T>& state, const T* d_rgb, const T* d_alpha, const T* d_depth,
+                    T* isect_grads) {
+  if (smooth_cutoff)
+    backward_tile<T, true>(bin, tile, background, state, d_rgb, d_alpha, d_depth, isect_grads);
+  else
+    backward_tile<T, false>(bin, tile, background, state, d_rgb, d_alpha, d_depth, isect_grads);
+}
+
+#define D2GS_TILE_STR2(x) #x
+#define D2GS_TILE_STR(x) D2GS_TILE_STR2(x)
+
+}  // namespace
+
+const TileKernels<float>& kernels_float() {
+  static const TileKernels<float> k{D2GS_TILE_STR(D2GS_TILE_ISA), &forward_entry<float>, &backward_entry<float>};
+  return k;
+}
+#ifdef D2GS_TILE_WITH_DOUBLE
+const TileKernels<double>& kernels_double() {
+  static const TileKernels<double> k{D2GS_TILE_STR(D2GS_TILE_ISA), &forward_entry<double>,
+                                     &backward_entry<double>};
+  return k;
+}
+#endif
+
+}  // namespace d2gs::render::cpu::D2GS_TILE_ISA
