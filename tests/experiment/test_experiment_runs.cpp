@@ -11,6 +11,7 @@
 
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/experiment/runner.hpp"
+#include "report/chromium.hpp"
 #include "test_paths.hpp"
 
 namespace d2gs::experiment {
@@ -84,6 +85,12 @@ TEST(ExperimentRuns, TwoMethodsTwoSeedsInParallelThenSkipped) {
   const std::string html = read_file(dir / "exp/report.html");
   EXPECT_EQ(count(html, "<img src=\"data:image/jpeg;base64,"), 3u * 5u);  // 3 views × (GT + 2 renders + 2 errors)
   EXPECT_NE(html.find("<section id=\"imr\">"), std::string::npos);
+  if (fs::exists(test::kChromium)) {  // the experiment report in a real browser: every image decodes, no errors
+    const test::Loaded loaded = test::load(dir / "exp/report.html", dir / "profile");
+    EXPECT_NE(loaded.dom.find("data-images-ok=\"15\""), std::string::npos) << loaded.dom.substr(0, 2000);
+    EXPECT_EQ(loaded.dom.find("id=\"load-error\""), std::string::npos);
+    EXPECT_EQ(test::page_errors(loaded.log), "");
+  }
 
   // Again: everything is skipped, nothing retrained, the tables are rebuilt (IMR from its cache).
   const auto before = fs::last_write_time(dir / "exp/runs/fern/3v/3dgs/seed0/results.json");

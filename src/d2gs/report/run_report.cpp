@@ -44,9 +44,15 @@ std::string metrics_html(const RunData& run) {
   std::vector<std::string> missing;
   for (const char* m : {"LPIPS", "AVGE"})
     if (!mean.count(m)) missing.emplace_back(m);
-  if (!missing.empty())
-    out += fmt::format("<p class=\"note\">Unavailable in results.json: {}.</p>\n", html_escape(fmt::format(
-                                                                                       "{}", fmt::join(missing, ", "))));
+  if (!missing.empty()) {
+    // d2gs eval records why LPIPS was skipped (e.g. no weights file); d2gs train does not compute it.
+    std::string why = " (<code>d2gs eval -m RUN --lpips-weights FILE</code> adds them)";
+    const auto& l = run.results.contains("lpips") ? run.results["lpips"] : nlohmann::json();
+    if (l.is_object() && l.contains("reason") && l["reason"].is_string())
+      why = ": " + html_escape(l["reason"].get<std::string>());
+    out += fmt::format("<p class=\"note\">Unavailable in results.json: {}{}.</p>\n",
+                       html_escape(fmt::format("{}", fmt::join(missing, ", "))), why);
+  }
   return out;
 }
 
