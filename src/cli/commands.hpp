@@ -16,5 +16,7 @@ Run add_train_command(CLI::App& app);
 Run add_eval_command(CLI::App& app);
 Run add_imr_command(CLI::App& app);
 Run add_init_command(CLI::App& app);
+Run add_report_command(CLI::App& app);
+Run add_experiment_command(CLI::App& app);
 
 }  // namespace d2gs::cli

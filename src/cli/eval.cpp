@@ -10,6 +10,7 @@
 #include "d2gs/core/error.hpp"
 #include "d2gs/eval/evaluate.hpp"
 #include "d2gs/model/ply.hpp"
+#include "d2gs/report/run_report.hpp"
 #include "d2gs/train/config.hpp"
 
 namespace d2gs::cli {
@@ -104,6 +105,7 @@ Run add_eval_command(CLI::App& app) {
     if (*json_only) std::printf("%s\n", j.dump(2).c_str());
     else std::printf("%s(%s, iteration %d, %zu Gaussians%s)\nwritten %s\n", format_table(summary).c_str(),
                      to_string(c.method), it, model.size(), oracle ? ", ORACLE init" : "", (run / "results.json").c_str());
+    report::write_run_report_or_warn(run);
     return 0;
   };
 }

@@ -34,6 +34,8 @@ int main(int argc, char** argv) {
   add(d2gs::cli::add_eval_command);
   add(d2gs::cli::add_imr_command);
   add(d2gs::cli::add_demo_command);
+  add(d2gs::cli::add_report_command);
+  add(d2gs::cli::add_experiment_command);
 
   try {
     app.parse(argc, argv);

@@ -6,6 +6,7 @@
 #include "cli/commands.hpp"
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
+#include "d2gs/report/run_report.hpp"
 #include "d2gs/train/presets.hpp"
 #include "d2gs/train/trainer.hpp"
 
@@ -132,6 +133,8 @@ Run add_train_command(CLI::App& app) {
     update_from_json(c, given);
     Trainer trainer(c, *resume);
     trainer.run();
+    if (std::filesystem::is_regular_file(std::filesystem::path(c.model_dir) / "results.json"))
+      report::write_run_report_or_warn(c.model_dir);
     return 0;
   };
 }

@@ -21,6 +21,7 @@
 #include "d2gs/core/npy.hpp"
 #include "d2gs/model/ply.hpp"
 #include "d2gs/scene/scene.hpp"
+#include "d2gs/scene/split.hpp"
 #include "test_paths.hpp"
 
 namespace d2gs {
@@ -474,7 +475,7 @@ TEST(SyntheticScene, RejectsBadOptions) {
 
 TEST(DemoCommand, GeneratesTheSceneAndSaysWhatNext) {
   const auto dir = scratch_dir() / "my demo";
-  const auto r = test::run_cli(fmt::format("demo -o '{}' --views 3 --seed 5", dir.string()));
+  const auto r = test::run_cli(fmt::format("demo -o '{}' --views 3 --seed 5 --scene-only", dir.string()));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find(dir.string()), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("Next: d2gs info"), std::string::npos) << r.output;
@@ -495,6 +496,57 @@ TEST(DemoCommand, GeneratesTheSceneAndSaysWhatNext) {
   EXPECT_NE(refused.output.find("refusing"), std::string::npos) << refused.output;
   const auto bad = test::run_cli(fmt::format("demo -o '{}' --views 1", (dir.parent_path() / "v").string()));
   EXPECT_NE(bad.exit_code, 0);
+}
+
+// The whole demo on a small schedule: scene, initial points from the training views' depth only, D²GS
+// training, evaluation and the report, whose path it prints. Run twice into the same folder: the second
+// replaces the first demo's run.
+TEST(DemoCommand, TrainsEvaluatesAndWritesTheReport) {
+  const auto dir = scratch_dir() / "demo";
+  for (int attempt = 0; attempt < 2; ++attempt) {
+    const auto r = test::run_cli(fmt::format("demo -o '{}' --views 9 -r 8 --iterations 12", dir.string()));
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    const auto report = dir / "run" / "report.html";
+    EXPECT_NE(r.output.find("Report: " + report.string()), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("Held-out views: PSNR"), std::string::npos) << r.output;
+    ASSERT_TRUE(fs::is_regular_file(report));
+    const std::string html = read_file(report);
+    for (const char* id : {"metrics", "curves", "views", "layers"})
+      EXPECT_NE(html.find(std::string("<section id=\"") + id + "\">"), std::string::npos) << id;
+    const auto results = nlohmann::json::parse(read_file(dir / "run" / "results.json"));
+    EXPECT_EQ(results["iteration"], 12);
+    EXPECT_EQ(results["per_view"].size(), 2u);  // images 0 and 8
+  }
+  // The initial cloud comes from the 3 training views only: about 10 000 points, each of which lies at
+  // the true depth of some training view's pixel.
+  const PointCloud init = read_point_cloud_ply(dir / "init_training_views.ply");
+  EXPECT_GT(init.size(), 8000u);
+  EXPECT_LT(init.size(), 12000u);
+  const Scene scene = load_scene(dir);
+  SplitOptions so;
+  so.n_views = 3;
+  const Split split = make_split(scene, so);
+  std::vector<NpyArray> depth;
+  for (int v : split.train) depth.push_back(read_npy(dir / "depth" / fmt::format("image{:03d}.npy", v)));
+  std::size_t on_surface = 0;
+  for (const auto& p : init.positions) {
+    bool hit = false;
+    for (std::size_t k = 0; k < split.train.size() && !hit; ++k) {
+      const Camera& cam = scene.cameras[static_cast<std::size_t>(split.train[k])];
+      const glm::dvec3 c = cam.R_world_to_cam * glm::dvec3(p) + cam.t_world_to_cam;
+      if (c.z <= 0) continue;
+      const int x = static_cast<int>(std::floor(cam.fx * c.x / c.z + cam.cx));
+      const int y = static_cast<int>(std::floor(cam.fy * c.y / c.z + cam.cy));
+      if (x < 0 || y < 0 || x >= cam.width || y >= cam.height) continue;
+      const double d = depth[k].values[static_cast<std::size_t>(y) * cam.width + x];
+      hit = std::abs(d - c.z) < 1e-4 * c.z;
+    }
+    on_surface += hit ? 1 : 0;
+  }
+  EXPECT_EQ(on_surface, init.size());
+  const auto config = nlohmann::json::parse(read_file(dir / "run" / "config.json"));
+  EXPECT_EQ(config["method"], "d2gs");
+  EXPECT_EQ(config["n_views"], 3);
 }
 
 }  // namespace

@@ -1,0 +1,167 @@
+// d2gs experiment: methods × scenes × view counts × seeds, one run folder each, resumable, run locally in
+// parallel (--jobs) or as a Slurm job array (--emit-slurm, --run-index); `collect` builds the tables and
+// the report from the experiment folder.
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+#include <string>
+
+#include "cli/commands.hpp"
+#include "d2gs/core/error.hpp"
+#include "d2gs/core/log.hpp"
+#include "d2gs/experiment/collect.hpp"
+#include "d2gs/experiment/runner.hpp"
+#include "d2gs/experiment/slurm.hpp"
+
+namespace d2gs::cli {
+namespace {
+namespace fs = std::filesystem;
+
+struct ExperimentOptions {
+  std::string config;
+  std::string out;
+  std::string data_root;
+  int jobs = 1;
+  int run_index = -1;
+  bool list = false;
+  bool collect = false;
+  bool no_imr = false;
+  bool emit_slurm = false;
+  experiment::SlurmOptions slurm;
+};
+
+void print_collect(const experiment::CollectResult& r) {
+  std::printf("%s\n", r.markdown.c_str());
+  std::printf("%d of %d runs finished\nwritten %s\nwritten %s\n", r.finished, r.total, r.markdown_path.c_str(),
+              r.csv_path.c_str());
+  if (!r.report_path.empty()) std::printf("written %s\n", r.report_path.c_str());
+}
+
+int run_experiment_command(const ExperimentOptions& o) {
+  const fs::path out = fs::absolute(o.out).lexically_normal();
+  const auto progress = [](const std::string& line) { spdlog::info("experiment: {}", line); };
+  experiment::ExperimentConfig config;
+  std::vector<experiment::RunSpec> runs;
+  if (!o.config.empty()) {
+    config = experiment::load_experiment_config(o.config, o.data_root);
+    runs = experiment::expand_runs(config, out);
+    if (o.run_index < 0 || !fs::exists(out / "experiment.json")) experiment::write_experiment_state(out, config, runs);
+  } else {
+    if (!o.data_root.empty()) fail("option --data-root needs --config");
+    std::tie(config, runs) = experiment::read_experiment_state(out);
+  }
+
+  experiment::CollectOptions co;
+  co.imr = !o.no_imr;
+  co.progress = progress;
+  if (o.collect) {
+    print_collect(experiment::collect(config, runs, out, co));
+    return 0;
+  }
+  if (o.emit_slurm) {
+    experiment::SlurmOptions s = o.slurm;
+    s.out_dir = out;
+    if (s.program.empty()) s.program = fs::read_symlink("/proc/self/exe");
+    s.program = fs::absolute(s.program);
+    experiment::write_slurm_scripts(config, runs.size(), s);
+    std::printf("%zu runs; written %s and %s\nsubmit with:\n  jobid=$(sbatch --parsable %s)\n"
+                "  sbatch --dependency=afterany:$jobid %s\n",
+                runs.size(), (out / "slurm/runs.sbatch").c_str(), (out / "slurm/collect.sbatch").c_str(),
+                (out / "slurm/runs.sbatch").c_str(), (out / "slurm/collect.sbatch").c_str());
+    return 0;
+  }
+  if (o.list) {
+    std::printf("%-5s %-48s %s\n", "index", "run", "status");
+    for (const auto& r : runs)
+      std::printf("%-5d %-48s %s\n", r.index, r.dir.string().c_str(),
+                  experiment::run_finished(out, r) ? "finished"
+                  : fs::exists(out / "logs" / (r.id() + ".log")) ? "started (failed, interrupted or running)"
+                                                                  : "pending");
+    return 0;
+  }
+
+  experiment::RunnerOptions ro;
+  ro.jobs = o.jobs;
+  ro.keep_checkpoints = config.keep_checkpoints;
+  ro.progress = progress;
+  std::vector<experiment::RunSpec> todo = runs;
+  if (o.run_index >= 0) {
+    if (o.run_index >= static_cast<int>(runs.size()))
+      fail("option --run-index {} is outside the experiment's {} runs (0..{})", o.run_index, runs.size(), runs.size() - 1);
+    todo = {runs[static_cast<std::size_t>(o.run_index)]};
+    ro.jobs = 1;
+  }
+  const auto outcomes = experiment::run_all(todo, out, ro);
+  int failed = 0, trained = 0, skipped = 0;
+  std::string failures;
+  for (const auto& oc : outcomes) {
+    if (oc.status == experiment::RunStatus::Failed) {
+      ++failed;
+      failures += fmt::format("\n  run {} {}: {} (log: {})", oc.index, oc.id, oc.message,
+                              (out / "logs" / (oc.id + ".log")).string());
+    } else if (oc.status == experiment::RunStatus::Finished) {
+      ++trained;
+    } else {
+      ++skipped;
+    }
+  }
+  std::printf("experiment %s: %d trained, %d skipped, %d failed\n", config.name.c_str(), trained, skipped, failed);
+  if (o.run_index < 0) print_collect(experiment::collect(config, runs, out, co));
+  if (failed > 0) {
+    std::fprintf(stderr, "failed runs:%s\n", failures.c_str());
+    fail("experiment {}: {} of {} runs failed (the others are done; rerun the same command to retry)", config.name,
+         failed, outcomes.size());
+  }
+  return 0;
+}
+
+}  // namespace
+
+Run add_experiment_command(CLI::App& app) {
+  auto o = std::make_shared<ExperimentOptions>();
+  auto* cmd = app.add_subcommand("experiment", "Run methods × scenes × view counts × seeds and tabulate them");
+  cmd->footer(
+      "Runs go to DIR/runs/<scene>/<views>v/<method>[-<variant>]/seed<k> (logs: DIR/logs/, per-run configs:\n"
+      "DIR/configs/). Finished runs (results.json) are skipped; an interrupted run resumes from its last\n"
+      "checkpoint. Tables: DIR/tables/results.{md,csv}; report: DIR/report.html. Example configs:\n"
+      "configs/experiments/. Example: d2gs experiment --config configs/experiments/llff_fern_3views.json -o out/fern --jobs 2");
+  cmd->add_option("--config", o->config, "Experiment file (JSON); without it, DIR/experiment.json is used");
+  cmd->add_option("-o,--output", o->out, "Experiment folder (required)");
+  cmd->add_option("--data-root", o->data_root, "Folder the scene sources are relative to (overrides data_root)");
+  cmd->add_option("-j,--jobs", o->jobs, "Runs trained at once on this machine (child processes)")
+      ->check(CLI::Range(1, 256))->capture_default_str();
+  cmd->add_option("--run-index", o->run_index, "Train only run I (a Slurm array task), without collecting")
+      ->check(CLI::NonNegativeNumber);
+  cmd->add_flag("--list", o->list, "Print the run list and each run's status, run nothing");
+  cmd->add_flag("--collect", o->collect, "Only build the tables and the report from the folder");
+  cmd->add_flag("--no-imr", o->no_imr, "Skip the IMR computation when collecting");
+  cmd->add_flag("--emit-slurm", o->emit_slurm, "Write DIR/slurm/{runs,collect}.sbatch (a job array), run nothing");
+  cmd->add_option("--slurm-partition", o->slurm.partition, "Slurm partition");
+  cmd->add_option("--slurm-account", o->slurm.account, "Slurm account");
+  cmd->add_option("--slurm-time", o->slurm.time, "Time limit per run")->capture_default_str();
+  cmd->add_option("--slurm-cpus", o->slurm.cpus, "CPUs per run")->capture_default_str();
+  cmd->add_option("--slurm-gpus", o->slurm.gpus, "GPUs per run (--gres=gpu:N)")->capture_default_str();
+  cmd->add_option("--slurm-mem", o->slurm.mem, "Memory per run, e.g. 16G");
+  cmd->add_option("--slurm-max-parallel", o->slurm.max_parallel, "Array throttle: at most N runs at once");
+  cmd->add_option("--slurm-program", o->slurm.program, "d2gs program path on the cluster (default: this one)");
+
+  auto* collect = cmd->add_subcommand("collect", "Build the tables and the report of an experiment folder");
+  auto collect_out = std::make_shared<std::string>();
+  auto collect_no_imr = std::make_shared<bool>(false);
+  collect->add_option("-o,--output", *collect_out, "Experiment folder")->required();
+  collect->add_flag("--no-imr", *collect_no_imr, "Skip the IMR computation");
+  cmd->require_subcommand(0, 1);
+
+  return [o, collect, collect_out, collect_no_imr]() -> int {
+    ExperimentOptions opts = *o;
+    if (collect->parsed()) {
+      opts.out = *collect_out;
+      opts.collect = true;
+      opts.no_imr = opts.no_imr || *collect_no_imr;
+    }
+    if (opts.out.empty()) fail("experiment: option -o/--output (the experiment folder) is required");
+    return run_experiment_command(opts);
+  };
+}
+
+}  // namespace d2gs::cli

@@ -1,0 +1,220 @@
+#include "d2gs/experiment/experiment_config.hpp"
+
+#include <algorithm>
+#include <set>
+
+#include <fmt/format.h>
+
+#include "d2gs/core/atomic_file.hpp"
+#include "d2gs/core/error.hpp"
+#include "d2gs/train/config.hpp"
+#include "d2gs/train/presets.hpp"
+
+namespace d2gs::experiment {
+namespace fs = std::filesystem;
+
+namespace {
+
+// Names become folder names: letters, digits, '.', '_' and '-' only, not starting with '.'.
+bool safe_name(const std::string& s) {
+  if (s.empty() || s.size() > 64 || s.front() == '.') return false;
+  return std::all_of(s.begin(), s.end(), [](char c) {
+    return (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '.' || c == '_' ||
+           c == '-';
+  });
+}
+
+// Keys the experiment sets itself for every run.
+constexpr const char* kReservedKeys[] = {"source", "model_dir", "n_views", "seed", "method", "checkpoint_iterations",
+                                         "init_is_oracle", "scene_extent", "split"};
+
+void check_keys(const nlohmann::json& j, std::initializer_list<const char*> allowed, const fs::path& file,
+                const std::string& where) {
+  for (const auto& [key, value] : j.items())
+    if (std::find_if(allowed.begin(), allowed.end(), [&](const char* a) { return key == a; }) == allowed.end())
+      fail_file(file, "unknown key '{}' in {}", key, where);
+}
+
+void check_train_keys(const nlohmann::json& j, const fs::path& file, const std::string& where) {
+  if (!j.is_object()) fail_file(file, "{} must be an object of d2gs train config keys", where);
+  for (const auto& [key, value] : j.items())
+    for (const char* reserved : kReservedKeys)
+      if (key == reserved) fail_file(file, "{} sets '{}', which the experiment sets for each run", where, key);
+  TrainConfig probe;
+  try {
+    update_from_json(probe, j);
+  } catch (const Error& e) {
+    fail_file(file, "{}: {}", where, e.what());
+  }
+}
+
+template <typename T>
+T get(const nlohmann::json& j, const char* key, const T& fallback, const fs::path& file, const std::string& where) {
+  if (!j.contains(key)) return fallback;
+  try {
+    return j.at(key).get<T>();
+  } catch (const nlohmann::json::exception&) {
+    fail_file(file, "{}: key '{}' has the wrong type", where, key);
+  }
+}
+
+}  // namespace
+
+std::string RunSpec::id() const { return fmt::format("{}__{}v__{}__seed{}", scene, views, label, seed); }
+
+ExperimentConfig load_experiment_config(const fs::path& file, const std::string& data_root_override) {
+  nlohmann::json j;
+  try {
+    j = nlohmann::json::parse(read_file(file));
+  } catch (const nlohmann::json::parse_error& e) {
+    fail_file(file, "invalid JSON ({})", e.what());
+  }
+  return parse_experiment_config(j, file, data_root_override);
+}
+
+ExperimentConfig parse_experiment_config(const nlohmann::json& j, const fs::path& file,
+                                         const std::string& data_root_override) {
+  if (!j.is_object()) fail_file(file, "an experiment file is a JSON object");
+  check_keys(j, {"name", "description", "data_root", "scenes", "views", "seeds", "train", "methods",
+                 "checkpoint_every", "keep_checkpoints", "imr", "report"},
+             file, "the experiment");
+  ExperimentConfig c;
+  c.file = file;
+  c.raw = j;
+  const std::string top = "the experiment";
+  c.name = get<std::string>(j, "name", file.stem().string(), file, top);
+  c.description = get<std::string>(j, "description", "", file, top);
+  c.data_root = data_root_override.empty() ? get<std::string>(j, "data_root", "", file, top) : data_root_override;
+  if (!j.contains("scenes") || !j["scenes"].is_array() || j["scenes"].empty())
+    fail_file(file, "'scenes' must be a non-empty array");
+  std::set<std::string> names;
+  for (const auto& s : j["scenes"]) {
+    if (!s.is_object()) fail_file(file, "each scene is an object with name and source");
+    check_keys(s, {"name", "source", "scene_preset"}, file, "a scene");
+    SceneSpec spec;
+    spec.source = get<std::string>(s, "source", "", file, "a scene");
+    if (spec.source.empty()) fail_file(file, "a scene has no 'source'");
+    spec.name = get<std::string>(s, "name", fs::path(spec.source).filename().string(), file, "scene " + spec.source);
+    if (!safe_name(spec.name)) fail_file(file, "scene name '{}' must be letters, digits, '.', '_' or '-'", spec.name);
+    if (!names.insert(spec.name).second) fail_file(file, "scene name '{}' appears twice", spec.name);
+    spec.scene_preset = get<std::string>(s, "scene_preset", "", file, "scene " + spec.name);
+    fs::path src = spec.source;
+    if (src.is_relative() && !c.data_root.empty()) src = fs::path(c.data_root) / src;
+    spec.source = fs::absolute(src).lexically_normal().string();
+    c.scenes.push_back(spec);
+  }
+  c.views = get<std::vector<int>>(j, "views", {}, file, top);
+  if (c.views.empty()) fail_file(file, "'views' must list at least one view count (0 = all non-test views)");
+  for (int v : c.views)
+    if (v < 0) fail_file(file, "view count {} is negative", v);
+  if (std::set<int>(c.views.begin(), c.views.end()).size() != c.views.size()) fail_file(file, "'views' repeats a value");
+  c.seeds = get<std::vector<std::uint64_t>>(j, "seeds", {0}, file, top);
+  if (c.seeds.empty()) fail_file(file, "'seeds' must list at least one seed");
+  if (std::set<std::uint64_t>(c.seeds.begin(), c.seeds.end()).size() != c.seeds.size())
+    fail_file(file, "'seeds' repeats a value");
+  c.train = j.value("train", nlohmann::json::object());
+  check_train_keys(c.train, file, "'train'");
+  if (!j.contains("methods") || !j["methods"].is_array() || j["methods"].empty())
+    fail_file(file, "'methods' must be a non-empty array");
+  std::set<std::string> labels;
+  for (const auto& m : j["methods"]) {
+    if (!m.is_object()) fail_file(file, "each method is an object with at least 'method'");
+    check_keys(m, {"method", "variant", "preset", "scene_preset", "options"}, file, "a method");
+    MethodSpec spec;
+    spec.method = get<std::string>(m, "method", "", file, "a method");
+    try {
+      method_from_string(spec.method);
+    } catch (const Error& e) {
+      fail_file(file, "{}", e.what());
+    }
+    spec.variant = get<std::string>(m, "variant", "", file, "method " + spec.method);
+    if (!spec.variant.empty() && !safe_name(spec.variant))
+      fail_file(file, "variant name '{}' must be letters, digits, '.', '_' or '-'", spec.variant);
+    const std::string where = "method " + spec.label();
+    if (!labels.insert(spec.label()).second) fail_file(file, "method '{}' appears twice (give it a variant)", spec.label());
+    spec.preset = get<std::string>(m, "preset", "", file, where);
+    if (!spec.preset.empty() && spec.preset != "paper" && spec.preset != "release")
+      fail_file(file, "{}: preset must be 'paper' or 'release' (got '{}')", where, spec.preset);
+    if (m.contains("scene_preset")) {
+      if (m["scene_preset"].is_boolean()) spec.use_scene_preset = m["scene_preset"].get<bool>();
+      else if (m["scene_preset"].is_string()) spec.scene_preset = m["scene_preset"].get<std::string>();
+      else fail_file(file, "{}: scene_preset is true/false or a preset name", where);
+    }
+    spec.options = m.value("options", nlohmann::json::object());
+    check_train_keys(spec.options, file, where + " options");
+    c.methods.push_back(spec);
+  }
+  c.checkpoint_every = get<int>(j, "checkpoint_every", 1000, file, top);
+  if (c.checkpoint_every <= 0) fail_file(file, "'checkpoint_every' must be positive");
+  c.keep_checkpoints = get<bool>(j, "keep_checkpoints", false, file, top);
+  if (j.contains("imr")) {
+    const auto& imr = j["imr"];
+    if (!imr.is_object()) fail_file(file, "'imr' must be an object");
+    check_keys(imr, {"enabled", "samples"}, file, "'imr'");
+    c.imr_enabled = get<bool>(imr, "enabled", true, file, "'imr'");
+    c.imr_samples = get<std::size_t>(imr, "samples", 10000, file, "'imr'");
+  }
+  if (j.contains("report")) {
+    const auto& r = j["report"];
+    if (!r.is_object()) fail_file(file, "'report' must be an object");
+    check_keys(r, {"max_views"}, file, "'report'");
+    c.report_max_views = get<int>(r, "max_views", -1, file, "'report'");
+  }
+  return c;
+}
+
+std::vector<RunSpec> expand_runs(const ExperimentConfig& config, const fs::path& out_dir) {
+  const fs::path root = fs::absolute(out_dir).lexically_normal();
+  std::vector<RunSpec> runs;
+  for (const auto& scene : config.scenes)
+    for (int views : config.views)
+      for (const auto& m : config.methods)
+        for (std::uint64_t seed : config.seeds) {
+          RunSpec r;
+          r.index = static_cast<int>(runs.size());
+          r.scene = scene.name;
+          r.views = views;
+          r.label = m.label();
+          r.method = m.method;
+          r.variant = m.variant;
+          r.seed = seed;
+          r.dir = fs::path("runs") / scene.name / fmt::format("{}v", views) / m.label() / fmt::format("seed{}", seed);
+          const std::string where = fmt::format("run {} ({})", r.index, r.id());
+          TrainConfig c;
+          try {
+            update_from_json(c, config.train);
+            if (!m.preset.empty()) {
+              apply_d2gs_preset(c, m.preset);
+              c.preset = m.preset;
+            }
+            const std::string scene_preset = !m.scene_preset.empty() ? m.scene_preset
+                                             : m.use_scene_preset   ? scene.scene_preset
+                                                                    : std::string();
+            if (m.use_scene_preset && m.scene_preset.empty() && scene.scene_preset.empty())
+              fail("method {} asks for the scene preset but scene {} names none", m.label(), scene.name);
+            if (!scene_preset.empty()) {
+              apply_scene_preset(c, scene_preset);
+              c.scene_preset = scene_preset;
+            }
+            update_from_json(c, m.options);
+            c.source = scene.source;
+            c.model_dir = (root / r.dir).string();
+            c.n_views = views;
+            c.seed = seed;
+            c.method = method_from_string(m.method);
+            std::vector<int> checkpoints;
+            for (int it = config.checkpoint_every; it < c.iterations; it += config.checkpoint_every)
+              checkpoints.push_back(it);
+            checkpoints.push_back(c.iterations);  // a run killed during its final evaluation resumes there
+            c.checkpoint_iterations = checkpoints;
+            c.validate();
+          } catch (const Error& e) {
+            fail_file(config.file, "{}: {}", where, e.what());
+          }
+          to_json(r.train_config, c);
+          runs.push_back(std::move(r));
+        }
+  return runs;
+}
+
+}  // namespace d2gs::experiment

@@ -1,0 +1,289 @@
+#include "d2gs/experiment/runner.hpp"
+
+#include <fcntl.h>
+#include <sys/file.h>
+#include <sys/prctl.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <chrono>
+#include <csignal>
+#include <cstring>
+#include <fstream>
+#include <map>
+#include <regex>
+#include <thread>
+
+#include <fmt/format.h>
+
+#include "d2gs/core/atomic_file.hpp"
+#include "d2gs/core/error.hpp"
+#include "d2gs/core/log.hpp"
+
+extern char** environ;
+
+namespace d2gs::experiment {
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+const char* to_string(RunStatus s) {
+  switch (s) {
+    case RunStatus::Finished: return "finished";
+    case RunStatus::Skipped: return "skipped (already finished)";
+    case RunStatus::Failed: return "FAILED";
+    case RunStatus::Busy: return "skipped (another runner holds it)";
+  }
+  return "?";
+}
+
+bool run_finished(const fs::path& out_dir, const RunSpec& run) {
+  return fs::is_regular_file(out_dir / run.dir / "results.json");
+}
+
+std::optional<std::pair<int, fs::path>> latest_checkpoint(const fs::path& run_dir, int max_iteration) {
+  std::error_code ec;
+  if (!fs::is_directory(run_dir, ec)) return std::nullopt;
+  const std::regex re("chkpnt([0-9]{1,9})\\.bin");
+  std::optional<std::pair<int, fs::path>> best;
+  for (const auto& e : fs::directory_iterator(run_dir)) {
+    std::smatch m;
+    const std::string name = e.path().filename().string();
+    if (!e.is_regular_file() || !std::regex_match(name, m, re)) continue;
+    const int it = std::stoi(m[1]);
+    if (it <= max_iteration && (!best || it > best->first)) best = std::make_pair(it, e.path());
+  }
+  return best;
+}
+
+namespace {
+
+// The last line of a log that reads like an error, else its last non-empty line.
+std::string last_error_line(const fs::path& log) {
+  std::ifstream in(log);
+  std::string line, last, error;
+  while (std::getline(in, line)) {
+    if (line.empty()) continue;
+    last = line;
+    if (line.find("error") != std::string::npos) error = line;
+  }
+  return error.empty() ? last : error;
+}
+
+struct Child {
+  std::size_t slot = 0;  // position in the run list
+  int lock_fd = -1;
+  Clock::time_point started;
+};
+
+// Starts `argv` with stdout and stderr appended to `log`; the child dies with its parent.
+pid_t spawn(const std::vector<std::string>& args, const std::vector<std::string>& env, const fs::path& log) {
+  std::vector<char*> argv, envp;
+  for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+  argv.push_back(nullptr);
+  for (const auto& e : env) envp.push_back(const_cast<char*>(e.c_str()));
+  envp.push_back(nullptr);
+  const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
+  if (fd < 0) fail_file(log, "cannot open for writing ({})", std::strerror(errno));
+  const pid_t parent = ::getpid();
+  const pid_t pid = ::fork();
+  if (pid < 0) {
+    ::close(fd);
+    fail("experiment: fork failed ({})", std::strerror(errno));
+  }
+  if (pid == 0) {
+    ::prctl(PR_SET_PDEATHSIG, SIGTERM);
+    if (::getppid() != parent) ::_exit(125);
+    const int null_in = ::open("/dev/null", O_RDONLY);
+    if (null_in >= 0) ::dup2(null_in, STDIN_FILENO);
+    ::dup2(fd, STDOUT_FILENO);
+    ::dup2(fd, STDERR_FILENO);
+    ::execve(argv[0], argv.data(), envp.data());
+    const char msg[] = "d2gs: error: experiment: cannot execute the d2gs program\n";
+    [[maybe_unused]] const auto n = ::write(STDERR_FILENO, msg, sizeof msg - 1);
+    ::_exit(127);
+  }
+  ::close(fd);
+  return pid;
+}
+
+}  // namespace
+
+std::vector<RunOutcome> run_all(const std::vector<RunSpec>& runs, const fs::path& out_dir, const RunnerOptions& options) {
+  const fs::path root = fs::absolute(out_dir);
+  const fs::path program = options.program.empty() ? fs::read_symlink("/proc/self/exe") : options.program;
+  const int jobs = std::max(1, options.jobs);
+  const auto say = [&](const std::string& line) {
+    if (options.progress) options.progress(line);
+  };
+  fs::create_directories(root / "logs");
+  fs::create_directories(root / "configs");
+
+  // Environment of the children: ours, with the OpenMP threads shared out between parallel jobs.
+  std::vector<std::string> env;
+  bool has_omp = false;
+  for (char** e = environ; e && *e; ++e) {
+    env.emplace_back(*e);
+    has_omp = has_omp || env.back().rfind("OMP_NUM_THREADS=", 0) == 0;
+  }
+  if (!has_omp && jobs > 1) {
+    const unsigned hw = std::max(1u, std::thread::hardware_concurrency());
+    env.push_back(fmt::format("OMP_NUM_THREADS={}", std::max(1u, hw / static_cast<unsigned>(jobs))));
+  }
+
+  std::vector<RunOutcome> outcomes(runs.size());
+  std::vector<std::size_t> todo;
+  for (std::size_t k = 0; k < runs.size(); ++k) {
+    outcomes[k].index = runs[k].index;
+    outcomes[k].id = runs[k].id();
+    if (run_finished(root, runs[k])) {
+      outcomes[k].status = RunStatus::Skipped;
+      say(fmt::format("run {} {}: skipped, already finished", runs[k].index, runs[k].id()));
+    } else {
+      todo.push_back(k);
+    }
+  }
+
+  std::map<pid_t, Child> running;
+  std::size_t next = 0;
+  std::size_t done = 0;
+  const auto launch = [&](std::size_t k) {
+    const RunSpec& run = runs[k];
+    RunOutcome& out = outcomes[k];
+    const fs::path log = root / "logs" / (run.id() + ".log");
+    const fs::path lock = root / "logs" / (run.id() + ".lock");
+    const int lock_fd = ::open(lock.c_str(), O_WRONLY | O_CREAT | O_CLOEXEC, 0644);
+    if (lock_fd < 0) fail_file(lock, "cannot open ({})", std::strerror(errno));
+    if (::flock(lock_fd, LOCK_EX | LOCK_NB) != 0) {
+      ::close(lock_fd);
+      out.status = RunStatus::Busy;
+      say(fmt::format("run {} {}: skipped, another runner is training it", run.index, run.id()));
+      return;
+    }
+    // Checked again under the lock: another runner may have finished it meanwhile.
+    if (run_finished(root, run)) {
+      ::close(lock_fd);
+      out.status = RunStatus::Skipped;
+      return;
+    }
+    const fs::path run_dir = root / run.dir;
+    const fs::path config = root / "configs" / (run.id() + ".json");
+    write_file_atomic(config, run.train_config.dump(2) + "\n");
+    std::vector<std::string> args = {program.string(), "train", "--config", config.string()};
+    const int iterations = run.train_config.at("iterations").get<int>();
+    std::string how = "starting";
+    if (const auto ckpt = latest_checkpoint(run_dir, iterations)) {
+      args.insert(args.end(), {"--resume", ckpt->second.string()});
+      out.resumed_from = ckpt->first;
+      how = fmt::format("resuming from {}", ckpt->second.filename().string());
+    } else if (fs::exists(run_dir)) {
+      // Killed before its first checkpoint: nothing to continue from.
+      fs::remove_all(run_dir);
+      how = "restarting (no checkpoint left by the previous attempt)";
+    }
+    fs::create_directories(run_dir.parent_path());
+    {
+      std::ofstream header(log, std::ios::app);
+      header << fmt::format("==== d2gs experiment: run {} {}, {} ====\n", run.index, run.id(), how);
+    }
+    say(fmt::format("run {} {}: {} (log: {})", run.index, run.id(), how, log.string()));
+    try {
+      const pid_t pid = spawn(args, env, log);
+      running[pid] = Child{k, lock_fd, Clock::now()};
+    } catch (const Error& e) {
+      ::close(lock_fd);
+      out.status = RunStatus::Failed;
+      out.message = e.what();
+      say(fmt::format("run {} {}: FAILED to start: {}", run.index, run.id(), e.what()));
+    }
+  };
+
+  while (next < todo.size() || !running.empty()) {
+    while (static_cast<int>(running.size()) < jobs && next < todo.size()) launch(todo[next++]);
+    if (running.empty()) continue;
+    int status = 0;
+    const pid_t pid = ::waitpid(-1, &status, 0);
+    if (pid < 0) {
+      if (errno == EINTR) continue;
+      fail("experiment: waiting for runs failed ({})", std::strerror(errno));
+    }
+    const auto it = running.find(pid);
+    if (it == running.end()) continue;
+    const Child child = it->second;
+    running.erase(it);
+    const RunSpec& run = runs[child.slot];
+    RunOutcome& out = outcomes[child.slot];
+    out.seconds = std::chrono::duration<double>(Clock::now() - child.started).count();
+    const fs::path log = root / "logs" / (run.id() + ".log");
+    const bool ok = WIFEXITED(status) && WEXITSTATUS(status) == 0 && run_finished(root, run);
+    ++done;
+    if (ok) {
+      out.status = RunStatus::Finished;
+      const auto metrics = [&]() -> std::string {
+        try {
+          const auto j = nlohmann::json::parse(read_file(root / run.dir / "results.json"));
+          return fmt::format("PSNR {:.3f}, SSIM {:.4f}", j.at("mean").at("PSNR").get<double>(),
+                             j.at("mean").at("SSIM").get<double>());
+        } catch (const std::exception&) {
+          return "results.json written";
+        }
+      }();
+      if (!options.keep_checkpoints) {
+        // Checkpoints served their purpose once results.json exists.
+        std::error_code ec;
+        std::vector<fs::path> checkpoints;
+        const std::regex re("chkpnt[0-9]+\\.bin");
+        for (const auto& e : fs::directory_iterator(root / run.dir, ec))
+          if (std::regex_match(e.path().filename().string(), re)) checkpoints.push_back(e.path());
+        for (const auto& p : checkpoints) fs::remove(p, ec);
+      }
+      say(fmt::format("run {} {}: finished in {:.1f} s ({})", run.index, run.id(), out.seconds, metrics));
+    } else {
+      out.status = RunStatus::Failed;
+      const std::string why = WIFSIGNALED(status) ? fmt::format("killed by signal {}", WTERMSIG(status))
+                                                  : fmt::format("exit code {}", WEXITSTATUS(status));
+      out.message = why + ": " + last_error_line(log);
+      say(fmt::format("run {} {}: FAILED ({}); log: {}", run.index, run.id(), out.message, log.string()));
+    }
+    ::close(child.lock_fd);
+  }
+  return outcomes;
+}
+
+void write_experiment_state(const fs::path& out_dir, const ExperimentConfig& config, const std::vector<RunSpec>& runs) {
+  nlohmann::json raw = config.raw;
+  raw.erase("data_root");
+  for (std::size_t k = 0; k < config.scenes.size() && k < raw["scenes"].size(); ++k) {
+    raw["scenes"][k]["source"] = config.scenes[k].source;
+    raw["scenes"][k]["name"] = config.scenes[k].name;
+  }
+  nlohmann::json list = nlohmann::json::array();
+  for (const auto& r : runs)
+    list.push_back({{"index", r.index}, {"id", r.id()}, {"dir", r.dir.string()}, {"scene", r.scene},
+                    {"views", r.views}, {"method", r.label}, {"seed", r.seed}});
+  const nlohmann::json state = {{"format", "d2gs-experiment-1"},
+                                {"config_file", fs::absolute(config.file).string()},
+                                {"config", raw},
+                                {"runs", list}};
+  fs::create_directories(out_dir);
+  write_file_atomic(out_dir / "experiment.json", state.dump(2) + "\n");
+}
+
+std::pair<ExperimentConfig, std::vector<RunSpec>> read_experiment_state(const fs::path& out_dir) {
+  const fs::path file = out_dir / "experiment.json";
+  if (!fs::is_regular_file(file))
+    fail_file(out_dir, "holds no experiment.json (run `d2gs experiment --config EXP.json -o DIR` first)");
+  nlohmann::json state;
+  try {
+    state = nlohmann::json::parse(read_file(file));
+  } catch (const nlohmann::json::parse_error& e) {
+    fail_file(file, "invalid JSON ({})", e.what());
+  }
+  if (!state.is_object() || state.value("format", "") != "d2gs-experiment-1" || !state.contains("config"))
+    fail_file(file, "not a d2gs experiment state file");
+  ExperimentConfig config = parse_experiment_config(state["config"], file);
+  std::vector<RunSpec> runs = expand_runs(config, out_dir);
+  return {std::move(config), std::move(runs)};
+}
+
+}  // namespace d2gs::experiment

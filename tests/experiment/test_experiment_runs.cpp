@@ -1,0 +1,190 @@
+// `d2gs experiment` end to end on fern (1/8 resolution, 3 views, a few iterations): parallel runs, tables
+// and reports, skipping finished runs, resuming an interrupted run from its checkpoint (bit-identically),
+// a killed experiment resuming, a failing run not stopping the others.
+#include <csignal>
+#include <chrono>
+#include <cstdio>
+#include <thread>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include "d2gs/core/atomic_file.hpp"
+#include "d2gs/experiment/runner.hpp"
+#include "report/chromium.hpp"
+#include "test_paths.hpp"
+
+namespace d2gs::experiment {
+namespace {
+namespace fs = std::filesystem;
+
+std::size_t count(const std::string& s, const std::string& what) {
+  std::size_t n = 0;
+  for (std::size_t p = 0; (p = s.find(what, p)) != std::string::npos; p += what.size()) ++n;
+  return n;
+}
+
+// A tiny experiment file: fern, 3 views, -r 8, `iterations` iterations.
+fs::path write_config(const fs::path& dir, const nlohmann::json& methods, const std::vector<int>& seeds,
+                      int iterations, int checkpoint_every, bool keep_checkpoints = false) {
+  const nlohmann::json j = {
+      {"name", "tiny"},
+      {"data_root", test::shared_data().string()},
+      {"scenes", {{{"name", "fern"}, {"source", "nerf_llff_data/fern"}, {"scene_preset", "llff/fern"}}}},
+      {"views", {3}},
+      {"seeds", seeds},
+      {"train", {{"resolution", 8}, {"iterations", iterations}, {"log_every", 1}}},
+      {"methods", methods},
+      {"checkpoint_every", checkpoint_every},
+      {"keep_checkpoints", keep_checkpoints},
+      {"imr", {{"samples", 200}}}};
+  write_file_atomic(dir / "exp.json", j.dump(2));
+  return dir / "exp.json";
+}
+
+std::string experiment(const fs::path& config, const fs::path& out, const std::string& extra, int* code) {
+  const auto r = test::run_cli("experiment --config '" + config.string() + "' -o '" + out.string() + "' " + extra);
+  *code = r.exit_code;
+  return r.output;
+}
+
+double psnr_of(const fs::path& run) {
+  return nlohmann::json::parse(read_file(run / "results.json"))["mean"]["PSNR"].get<double>();
+}
+
+TEST(ExperimentRuns, TwoMethodsTwoSeedsInParallelThenSkipped) {
+  const auto dir = test::scratch_dir();
+  const auto config = write_config(dir, {{{"method", "3dgs"}}, {{"method", "dropgaussian"}}}, {0, 1}, 6, 3);
+  int code = -1;
+  const std::string out = experiment(config, dir / "exp", "--jobs 2", &code);
+  ASSERT_EQ(code, 0) << out;
+  for (const char* m : {"3dgs", "dropgaussian"})
+    for (const char* s : {"seed0", "seed1"}) {
+      const fs::path run = dir / "exp/runs/fern/3v" / m / s;
+      EXPECT_TRUE(fs::is_regular_file(run / "results.json")) << run;
+      EXPECT_TRUE(fs::is_regular_file(run / "report.html")) << run;
+      EXPECT_FALSE(fs::exists(run / "chkpnt3.bin")) << "checkpoints are removed once a run finished";
+      EXPECT_FALSE(fs::exists(run / "chkpnt6.bin"));
+    }
+  EXPECT_NE(out.find("4 trained, 0 skipped, 0 failed"), std::string::npos) << out;
+  // Seeds differ, and the same seed of another method too (the runs are really independent).
+  EXPECT_NE(psnr_of(dir / "exp/runs/fern/3v/3dgs/seed0"), psnr_of(dir / "exp/runs/fern/3v/3dgs/seed1"));
+  const std::string md = read_file(dir / "exp/tables/results.md");
+  EXPECT_NE(md.find("### fern, 3 views"), std::string::npos) << md;
+  EXPECT_NE(md.find("| 3dgs | "), std::string::npos) << md;
+  EXPECT_NE(md.find("| dropgaussian | "), std::string::npos) << md;
+  EXPECT_EQ(count(md, " ± "), 1u + 2u * 4u) << md;  // the legend, then PSNR, SSIM, #G, time per row (no LPIPS/AVGE)
+  EXPECT_EQ(count(md, "| 2/2 |"), 2u) << md;
+  const std::string csv = read_file(dir / "exp/tables/results.csv");
+  EXPECT_EQ(count(csv, "\n"), 3u) << csv;
+  EXPECT_NE(csv.find("fern,3,dropgaussian,,dropgaussian,2,2,"), std::string::npos) << csv;
+  // IMR per method over the two seeds.
+  const auto imr = nlohmann::json::parse(read_file(dir / "exp/imr/fern__3v__3dgs.json"));
+  EXPECT_TRUE(std::isfinite(imr["imr"].get<double>()));
+  EXPECT_EQ(imr["models"].size(), 2u);
+  const std::string html = read_file(dir / "exp/report.html");
+  EXPECT_EQ(count(html, "<img src=\"data:image/jpeg;base64,"), 3u * 5u);  // 3 views × (GT + 2 renders + 2 errors)
+  EXPECT_NE(html.find("<section id=\"imr\">"), std::string::npos);
+  if (fs::exists(test::kChromium)) {  // the experiment report in a real browser: every image decodes, no errors
+    const test::Loaded loaded = test::load(dir / "exp/report.html", dir / "profile");
+    EXPECT_NE(loaded.dom.find("data-images-ok=\"15\""), std::string::npos) << loaded.dom.substr(0, 2000);
+    EXPECT_EQ(loaded.dom.find("id=\"load-error\""), std::string::npos);
+    EXPECT_EQ(test::page_errors(loaded.log), "");
+  }
+
+  // Again: everything is skipped, nothing retrained, the tables are rebuilt (IMR from its cache).
+  const auto before = fs::last_write_time(dir / "exp/runs/fern/3v/3dgs/seed0/results.json");
+  const std::string again = experiment(config, dir / "exp", "--jobs 2", &code);
+  ASSERT_EQ(code, 0) << again;
+  EXPECT_EQ(count(again, "skipped, already finished"), 4u) << again;
+  EXPECT_NE(again.find("0 trained, 4 skipped, 0 failed"), std::string::npos) << again;
+  EXPECT_EQ(again.find("IMR of"), std::string::npos) << again;
+  EXPECT_EQ(fs::last_write_time(dir / "exp/runs/fern/3v/3dgs/seed0/results.json"), before);
+  // collect alone, from the folder's experiment.json.
+  const auto c = test::run_cli("experiment collect -o '" + (dir / "exp").string() + "' --no-imr");
+  ASSERT_EQ(c.exit_code, 0) << c.output;
+  EXPECT_NE(c.output.find("4 of 4 runs finished"), std::string::npos) << c.output;
+}
+
+TEST(ExperimentRuns, InterruptedRunResumesFromItsCheckpointBitIdentically) {
+  const auto dir = test::scratch_dir();
+  const auto config = write_config(dir, {{{"method", "d2gs"}, {"preset", "release"}}}, {3}, 6, 3, true);
+  int code = -1;
+  std::string out = experiment(config, dir / "exp", "--no-imr", &code);
+  ASSERT_EQ(code, 0) << out;
+  const fs::path run = dir / "exp/runs/fern/3v/d2gs/seed3";
+  const double psnr = psnr_of(run);
+  ASSERT_TRUE(fs::is_regular_file(run / "chkpnt3.bin"));
+  // What a run killed between its checkpoint at 3 and the end leaves behind.
+  for (const char* p : {"results.json", "report.html", "chkpnt6.bin"}) fs::remove(run / p);
+  fs::remove_all(run / "test");
+  fs::remove_all(run / "point_cloud");
+  out = experiment(config, dir / "exp", "--no-imr", &code);
+  ASSERT_EQ(code, 0) << out;
+  EXPECT_NE(out.find("resuming from chkpnt3.bin"), std::string::npos) << out;
+  EXPECT_EQ(psnr_of(run), psnr);  // the resumed run is the same run
+  // The curve has one record per iteration despite the resumed log.
+  const std::string log = read_file(run / "train_log.jsonl");
+  EXPECT_GE(count(log, "\"iteration\":4,"), 2u);  // written twice...
+  const std::string html = read_file(run / "report.html");
+  EXPECT_NE(html.find("<polyline"), std::string::npos);
+
+  // A run folder left without any checkpoint starts again from scratch.
+  for (const auto& e : fs::directory_iterator(run))
+    if (e.path().extension() == ".bin" || e.path().filename() == "results.json") fs::remove(e.path());
+  out = experiment(config, dir / "exp", "--no-imr", &code);
+  ASSERT_EQ(code, 0) << out;
+  EXPECT_NE(out.find("restarting (no checkpoint"), std::string::npos) << out;
+  EXPECT_EQ(psnr_of(run), psnr);
+}
+
+TEST(ExperimentRuns, KilledExperimentResumes) {
+  const auto dir = test::scratch_dir();
+  const auto config = write_config(dir, {{{"method", "3dgs"}}}, {0}, 12, 2, true);
+  const fs::path run = dir / "exp/runs/fern/3v/3dgs/seed0";
+  // Start in its own process group, then kill the whole group once the first checkpoint exists.
+  const std::string cmd = "setsid '" + test::cli_path().string() + "' experiment --config '" + config.string() +
+                          "' -o '" + (dir / "exp").string() + "' --no-imr >'" + (dir / "first.log").string() +
+                          "' 2>&1 & echo $!";
+  FILE* pipe = ::popen(cmd.c_str(), "r");
+  ASSERT_NE(pipe, nullptr);
+  int pid = 0;
+  ASSERT_EQ(std::fscanf(pipe, "%d", &pid), 1);
+  ::pclose(pipe);
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::minutes(5);
+  while (!fs::exists(run / "chkpnt2.bin") && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  ASSERT_TRUE(fs::exists(run / "chkpnt2.bin")) << read_file(dir / "first.log");
+  ::kill(-pid, SIGKILL);
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  ASSERT_FALSE(fs::exists(run / "results.json")) << "the run finished before it could be killed";
+  int code = -1;
+  const std::string out = experiment(config, dir / "exp", "--no-imr", &code);
+  ASSERT_EQ(code, 0) << out;
+  EXPECT_NE(out.find("resuming from chkpnt"), std::string::npos) << out;
+  EXPECT_TRUE(fs::is_regular_file(run / "results.json"));
+  EXPECT_NE(out.find("1 trained"), std::string::npos) << out;
+}
+
+TEST(ExperimentRuns, FailingRunIsReportedAndTheOthersFinish) {
+  const auto dir = test::scratch_dir();
+  const auto config = write_config(
+      dir,
+      {{{"method", "3dgs"}},
+       {{"method", "d2gs"}, {"variant", "broken"}, {"options", {{"dafe_prior_dir", (dir / "no-priors").string()}}}}},
+      {0}, 4, 2);
+  int code = -1;
+  const std::string out = experiment(config, dir / "exp", "--jobs 2 --no-imr", &code);
+  EXPECT_EQ(code, 1) << out;
+  EXPECT_NE(out.find("1 trained, 0 skipped, 1 failed"), std::string::npos) << out;
+  EXPECT_NE(out.find("run 1 fern__3v__d2gs-broken__seed0: exit code 1: d2gs: error: "), std::string::npos) << out;
+  EXPECT_NE(out.find("DAFE prior missing"), std::string::npos) << out;
+  EXPECT_NE(out.find("d2gs: error: experiment tiny: 1 of 2 runs failed"), std::string::npos) << out;
+  EXPECT_TRUE(fs::is_regular_file(dir / "exp/runs/fern/3v/3dgs/seed0/results.json"));
+  const std::string md = read_file(dir / "exp/tables/results.md");
+  EXPECT_NE(md.find("| d2gs-broken | — | — | — | — | — | — | — | 0/1 |"), std::string::npos) << md;
+  EXPECT_NE(read_file(dir / "exp/report.html").find("failed or interrupted"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace d2gs::experiment
