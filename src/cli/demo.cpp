@@ -33,16 +33,16 @@ struct DemoOptions {
   std::uint64_t seed = 0;
   int views = 20;
   bool scene_only = false;
-  int iterations = 600;
+  int iterations = 1000;
   int resolution = 2;
   int train_views = 3;
-  std::string init = "training-depth";
+  std::string init = "dense";
 };
 
 // Initial points from the training views only: every `stride`-th pixel of each training view's true
-// depth map (depth/NAME.npy, full resolution) lifted to the world, coloured by the image. A stand-in for
-// the planned sparse-view geometry (which would estimate these depths from the training images); the test
-// views contribute nothing, unlike points3D.ply.
+// depth map (depth/NAME.npy, full resolution) lifted to the world, coloured by the image (--init
+// training-depth: what the estimated geometry of the default --init dense would be if it were perfect);
+// the test views contribute nothing, unlike points3D.ply.
 PointCloud training_view_points(const std::filesystem::path& dir, const std::vector<int>& train, int per_view) {
   const Scene full = load_scene(dir);  // full resolution, the depth maps' size
   PointCloud cloud;
@@ -129,6 +129,7 @@ int run_demo(const DemoOptions& opt) {
     write_point_cloud_ply(ply, training_view_points(dir, split.train, 10000 / std::max<int>(1, split.train.size())));
     c.init = ply.string();
   } else {
+    // dense / sparse: the trainer runs d2gs init on the training images (cached in RUN/init); random.
     c.init = opt.init == "points" ? (dir / "points3D.ply").string() : opt.init;
   }
   c.densify_from = std::min(100, opt.iterations);
@@ -178,11 +179,12 @@ Run add_demo_command(CLI::App& app) {
       ->capture_default_str()
       ->check(CLI::Range(1, 1000));
   sub->add_option("--init", opt->init,
-                  "Initial points: 'training-depth' (the true depth of the training views only, lifted to 3D; "
-                  "written to OUTPUT/init_training_views.ply), 'random', or 'points' (the scene's points3D.ply, "
-                  "sampled from every view: an oracle)")
+                  "Initial points: 'dense' (stereo + fusion of the training images, as d2gs init and d2gs "
+                  "train do), 'sparse' (SIFT triangulation of the training images), 'training-depth' (the true "
+                  "depth of the training views only, lifted to 3D; written to OUTPUT/init_training_views.ply), "
+                  "'random', or 'points' (the scene's points3D.ply, sampled from every view: an oracle)")
       ->capture_default_str()
-      ->check(CLI::IsMember({"training-depth", "random", "points"}));
+      ->check(CLI::IsMember({"dense", "sparse", "training-depth", "random", "points"}));
   return [opt]() -> int { return run_demo(*opt); };
 }
 

@@ -498,14 +498,25 @@ TEST(DemoCommand, GeneratesTheSceneAndSaysWhatNext) {
   EXPECT_NE(bad.exit_code, 0);
 }
 
-// The whole demo on a small schedule: scene, initial points from the training views' depth only, D²GS
-// training, evaluation and the report, whose path it prints. Run twice into the same folder: the second
-// replaces the first demo's run.
+// The whole demo on a small schedule: scene, initial points from the training views only (first the
+// default, the estimated geometry of d2gs init; then the true depth of the training views), D²GS training,
+// evaluation and the report, whose path it prints. Run twice into the same folder: the second replaces the
+// first demo's run.
 TEST(DemoCommand, TrainsEvaluatesAndWritesTheReport) {
   const auto dir = scratch_dir() / "demo";
   for (int attempt = 0; attempt < 2; ++attempt) {
-    const auto r = test::run_cli(fmt::format("demo -o '{}' --views 9 -r 8 --iterations 12", dir.string()));
+    const std::string init = attempt == 0 ? "" : " --init training-depth";
+    const auto r = test::run_cli(fmt::format("demo -o '{}' --views 9 -r 8 --iterations 12{}", dir.string(), init));
     ASSERT_EQ(r.exit_code, 0) << r.output;
+    const auto run_config = nlohmann::json::parse(read_file(dir / "run" / "config.json"));
+    if (attempt == 0) {
+      // The trainer ran the geometry of the training images itself and cached it in the run folder.
+      EXPECT_EQ(run_config["init"], "dense");
+      EXPECT_EQ(run_config["init_is_oracle"], false);
+      EXPECT_TRUE(fs::is_directory(dir / "run" / "init")) << r.output;
+    } else {
+      EXPECT_EQ(run_config["init"], (dir / "init_training_views.ply").string());
+    }
     const auto report = dir / "run" / "report.html";
     EXPECT_NE(r.output.find("Report: " + report.string()), std::string::npos) << r.output;
     EXPECT_NE(r.output.find("Held-out views: PSNR"), std::string::npos) << r.output;
