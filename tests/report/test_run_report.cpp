@@ -136,7 +136,7 @@ TEST(ReportCli, TrainAndEvalWriteTheRunReport) {
   const auto dir = test::scratch_dir();
   const auto fern = test::shared_data() / "nerf_llff_data/fern";
   const auto r = test::run_cli("train -s '" + fern.string() + "' -m '" + (dir / "run").string() +
-                               "' -r 8 --n-views 3 --iterations 3 --quiet");
+                               "' -r 8 --n-views 3 --iterations 3 --init sfm-all-views --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   const std::string html = read_file(dir / "run/report.html");
   EXPECT_EQ(count(html, "<img src=\"data:image/jpeg;base64,"), 9u);  // fern: 3 test views
