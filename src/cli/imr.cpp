@@ -8,6 +8,7 @@
 // Reference camera: camera K (default 0, the release's first test camera = global image 0) of the scene
 // given with -s; without -s an identity camera at the origin is used (with a warning).
 #include <algorithm>
+#include <chrono>
 #include <filesystem>
 #include <memory>
 #include <string>
@@ -89,6 +90,21 @@ int run_imr(const ImrCommandOptions& o) {
   options.sinkhorn.max_iterations = o.max_iterations;
   options.sinkhorn.epsilon_scaling = o.epsilon_scaling;
   options.sinkhorn.threads = o.threads;
+  // A solve that takes long says where it stands every 10 s (iteration, change against the tolerance).
+  {
+    using Clock = std::chrono::steady_clock;
+    auto last = std::make_shared<Clock::time_point>(Clock::now());
+    auto started = std::make_shared<Clock::time_point>(Clock::now());
+    const int max_iterations = o.max_iterations;
+    options.sinkhorn.on_iteration = [last, started, max_iterations](int iteration, double change, double tolerance) {
+      const auto now = Clock::now();
+      if (iteration == 1) *started = now;
+      if (now - *last < std::chrono::seconds(10)) return;
+      *last = now;
+      spdlog::info("imr: Sinkhorn iteration {}/{}: potential change {:.3g} (stops below {:.3g}), {:.0f} s", iteration,
+                   max_iterations, change, tolerance, std::chrono::duration<double>(now - *started).count());
+    };
+  }
   options.debiased = o.debiased;
   if (o.cost == "stored") options.storage = CostStorage::StoredFloat;
   else if (o.cost == "stored-double") options.storage = CostStorage::StoredDouble;

@@ -223,6 +223,31 @@ TEST(Sinkhorn, StopsAtMaxIterationsAndReportsIt) {
   EXPECT_GT(r.last_change, o.tolerance);
 }
 
+TEST(Sinkhorn, ReportsEveryIterationToTheCallback) {
+  const Problem p = random_problem(80, 70, 6);
+  SinkhornOptions o;
+  o.epsilon = 0.01;
+  std::vector<int> seen;
+  double last = -1.0, tolerance = 0.0;
+  o.on_iteration = [&](int iteration, double change, double tol) {
+    seen.push_back(iteration);
+    last = change;
+    tolerance = tol;
+  };
+  const SinkhornResult r = sinkhorn(p.a, p.b, DenseCostMatrix<double>(p.n, p.m, p.c), o);
+  ASSERT_TRUE(r.converged);
+  ASSERT_EQ(static_cast<int>(seen.size()), r.iterations);
+  for (std::size_t k = 0; k < seen.size(); ++k) EXPECT_EQ(seen[k], static_cast<int>(k) + 1);
+  EXPECT_EQ(last, r.last_change);
+  EXPECT_EQ(tolerance, o.tolerance);
+  EXPECT_LT(last, tolerance);
+  // The callback observes; it does not change the solution.
+  o.on_iteration = nullptr;
+  const SinkhornResult quiet = sinkhorn(p.a, p.b, DenseCostMatrix<double>(p.n, p.m, p.c), o);
+  EXPECT_EQ(quiet.transport_cost, r.transport_cost);
+  EXPECT_EQ(quiet.iterations, r.iterations);
+}
+
 TEST(Sinkhorn, RejectsBadInput) {
   const Problem p = random_problem(4, 5, 1);
   const DenseCostMatrix<double> cost(p.n, p.m, p.c);

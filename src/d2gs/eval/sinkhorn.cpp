@@ -417,6 +417,7 @@ SinkhornResult sinkhorn(std::span<const double> a, std::span<const double> b, co
       for (const double d : dpsi) change = std::max(change, d);
       if (!std::isfinite(change)) fail("sinkhorn: the potentials diverged (non-finite values) at iteration {}", result.iterations);
       result.last_change = change;
+      if (options.on_iteration) options.on_iteration(result.iterations, change, tolerance);
       if (change < tolerance) {
         result.converged = true;
         break;

@@ -17,6 +17,7 @@
 // independent of the thread count. Exponentials use a vectorisable float exp (relative error ~1e-7) of
 // arguments already reduced in double, accumulated in double.
 #include <cstddef>
+#include <functional>
 #include <span>
 #include <vector>
 
@@ -82,6 +83,9 @@ struct SinkhornOptions {
   // log-sum-exp accurate to ~1e-7, so the potentials stop changing only down to ~1e-6: tolerances below
   // that need double_exp (several times slower; used for cross-checks).
   bool double_exp = false;
+  // Called after every iteration with the iteration count so far (over all ε stages), that iteration's
+  // change and the tolerance of the current stage: progress for long solves. Not called when empty.
+  std::function<void(int iteration, double change, double tolerance)> on_iteration;
 };
 
 struct SinkhornResult {
