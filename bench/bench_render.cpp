@@ -18,6 +18,7 @@
 
 #include "d2gs/render/cpu/binning.hpp"
 #include "d2gs/render/cpu/composite.hpp"
+#include "d2gs/render/cpu/cpu_rasterizer.hpp"
 #include "d2gs/render/cpu/projection.hpp"
 #include "d2gs/render/cpu/sh.hpp"
 #include "d2gs/render/raster_math.hpp"
@@ -100,19 +101,10 @@ void BM_RenderStages(benchmark::State& state) {
   const auto n = static_cast<std::size_t>(state.range(0));
   const Gaussians model = llff_like_model(n, 1234);
   const auto camera = render::make_render_camera(llff_camera());
-  ModelView<float> view;
-  view.count = n;
-  view.sh_degree = model.sh_degree;
-  view.means = model.means.data();
-  view.log_scales = model.log_scales.data();
-  view.quats = model.quats.data();
-  view.opacity_logits = model.opacity_logits.data();
-  view.sh_dc = model.sh_dc.data();
-  view.sh_rest = model.sh_rest.data();
+  const ModelView<float> view = model_view(model);
   Gaussians grads;
   grads.resize(n, model.sh_degree);
-  const ModelGradView<float> gview{grads.means.data(),          grads.log_scales.data(), grads.quats.data(),
-                                   grads.opacity_logits.data(), grads.sh_dc.data(),      grads.sh_rest.data()};
+  const ModelGradView<float> gview = model_grad_view(grads);
   Projected<float> proj;
   Binning<float> bin;
   PixelState<float> pixels;

@@ -75,15 +75,7 @@ public:
   const RenderOutputs& forward(const Gaussians& model, const float* opacity_multiplier, const RenderCamera& camera,
                                const RenderOptions& options) override {
     model.validate();
-    ModelView<float> view;
-    view.count = model.size();
-    view.sh_degree = model.sh_degree;
-    view.means = model.means.data();
-    view.log_scales = model.log_scales.data();
-    view.quats = model.quats.data();
-    view.opacity_logits = model.opacity_logits.data();
-    view.sh_dc = model.sh_dc.data();
-    view.sh_rest = model.sh_rest.data();
+    const ModelView<float> view = model_view(model);
     const std::size_t pixels = static_cast<std::size_t>(std::max(camera.width, 0)) * std::max(camera.height, 0);
     out_.width = camera.width;
     out_.height = camera.height;
@@ -113,9 +105,7 @@ public:
       g.sh_rest.resize(n_ * K * 3);
     }
     grads_.grad_mean2d_ndc.resize(n_ * 2);
-    ModelGradView<float> view{g.means.data(),          g.log_scales.data(), g.quats.data(),
-                              g.opacity_logits.data(), g.sh_dc.data(),      g.sh_rest.data()};
-    core_.backward(d_rgb, d_alpha, d_depth, view, grads_.grad_mean2d_ndc.data());
+    core_.backward(d_rgb, d_alpha, d_depth, model_grad_view(g), grads_.grad_mean2d_ndc.data());
     return grads_;
   }
 

@@ -8,6 +8,24 @@
 
 namespace d2gs::render::cpu {
 
+// Float views of a model's attribute arrays, and of a model-shaped gradient holder (sized like the model).
+inline ModelView<float> model_view(const Gaussians& model) {
+  ModelView<float> view;
+  view.count = model.size();
+  view.sh_degree = model.sh_degree;
+  view.means = model.means.data();
+  view.log_scales = model.log_scales.data();
+  view.quats = model.quats.data();
+  view.opacity_logits = model.opacity_logits.data();
+  view.sh_dc = model.sh_dc.data();
+  view.sh_rest = model.sh_rest.data();
+  return view;
+}
+inline ModelGradView<float> model_grad_view(Gaussians& grads) {
+  return {grads.means.data(),          grads.log_scales.data(), grads.quats.data(),
+          grads.opacity_logits.data(), grads.sh_dc.data(),      grads.sh_rest.data()};
+}
+
 template <typename T>
 struct Outputs {
   int width = 0, height = 0;
