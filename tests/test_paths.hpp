@@ -2,6 +2,7 @@
 // Paths every test may use, and a scratch folder per test.
 #include <sys/wait.h>
 
+#include <cstddef>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -24,6 +25,13 @@ inline std::filesystem::path scratch_dir() {
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
   return dir;
+}
+
+// How many times `what` occurs in `s` (non-overlapping).
+inline std::size_t count_occurrences(const std::string& s, const std::string& what) {
+  std::size_t n = 0;
+  for (std::size_t p = 0; (p = s.find(what, p)) != std::string::npos; p += what.size()) ++n;
+  return n;
 }
 
 struct CommandResult {

@@ -18,11 +18,7 @@ namespace d2gs::experiment {
 namespace {
 namespace fs = std::filesystem;
 
-std::size_t count(const std::string& s, const std::string& what) {
-  std::size_t n = 0;
-  for (std::size_t p = 0; (p = s.find(what, p)) != std::string::npos; p += what.size()) ++n;
-  return n;
-}
+using test::count_occurrences;
 
 // A tiny experiment file: fern, 3 views, -r 8, `iterations` iterations.
 fs::path write_config(const fs::path& dir, const nlohmann::json& methods, const std::vector<int>& seeds,
@@ -73,17 +69,17 @@ TEST(ExperimentRuns, TwoMethodsTwoSeedsInParallelThenSkipped) {
   EXPECT_NE(md.find("### fern, 3 views"), std::string::npos) << md;
   EXPECT_NE(md.find("| 3dgs | "), std::string::npos) << md;
   EXPECT_NE(md.find("| dropgaussian | "), std::string::npos) << md;
-  EXPECT_EQ(count(md, " ± "), 1u + 2u * 4u) << md;  // the legend, then PSNR, SSIM, #G, time per row (no LPIPS/AVGE)
-  EXPECT_EQ(count(md, "| 2/2 |"), 2u) << md;
+  EXPECT_EQ(count_occurrences(md, " ± "), 1u + 2u * 4u) << md;  // the legend, then PSNR, SSIM, #G, time per row (no LPIPS/AVGE)
+  EXPECT_EQ(count_occurrences(md, "| 2/2 |"), 2u) << md;
   const std::string csv = read_file(dir / "exp/tables/results.csv");
-  EXPECT_EQ(count(csv, "\n"), 3u) << csv;
+  EXPECT_EQ(count_occurrences(csv, "\n"), 3u) << csv;
   EXPECT_NE(csv.find("fern,3,dropgaussian,,dropgaussian,2,2,"), std::string::npos) << csv;
   // IMR per method over the two seeds.
   const auto imr = nlohmann::json::parse(read_file(dir / "exp/imr/fern__3v__3dgs.json"));
   EXPECT_TRUE(std::isfinite(imr["imr"].get<double>()));
   EXPECT_EQ(imr["models"].size(), 2u);
   const std::string html = read_file(dir / "exp/report.html");
-  EXPECT_EQ(count(html, "<img src=\"data:image/jpeg;base64,"), 3u * 5u);  // 3 views × (GT + 2 renders + 2 errors)
+  EXPECT_EQ(count_occurrences(html, "<img src=\"data:image/jpeg;base64,"), 3u * 5u);  // 3 views × (GT + 2 renders + 2 errors)
   EXPECT_NE(html.find("<section id=\"imr\">"), std::string::npos);
   if (fs::exists(test::kChromium)) {  // the experiment report in a real browser: every image decodes, no errors
     const test::Loaded loaded = test::load(dir / "exp/report.html", dir / "profile");
@@ -96,7 +92,7 @@ TEST(ExperimentRuns, TwoMethodsTwoSeedsInParallelThenSkipped) {
   const auto before = fs::last_write_time(dir / "exp/runs/fern/3v/3dgs/seed0/results.json");
   const std::string again = experiment(config, dir / "exp", "--jobs 2", &code);
   ASSERT_EQ(code, 0) << again;
-  EXPECT_EQ(count(again, "skipped, already finished"), 4u) << again;
+  EXPECT_EQ(count_occurrences(again, "skipped, already finished"), 4u) << again;
   EXPECT_NE(again.find("0 trained, 4 skipped, 0 failed"), std::string::npos) << again;
   EXPECT_EQ(again.find("IMR of"), std::string::npos) << again;
   EXPECT_EQ(fs::last_write_time(dir / "exp/runs/fern/3v/3dgs/seed0/results.json"), before);
@@ -125,7 +121,7 @@ TEST(ExperimentRuns, InterruptedRunResumesFromItsCheckpointBitIdentically) {
   EXPECT_EQ(psnr_of(run), psnr);  // the resumed run is the same run
   // The curve has one record per iteration despite the resumed log.
   const std::string log = read_file(run / "train_log.jsonl");
-  EXPECT_GE(count(log, "\"iteration\":4,"), 2u);  // written twice...
+  EXPECT_GE(count_occurrences(log, "\"iteration\":4,"), 2u);  // written twice...
   const std::string html = read_file(run / "report.html");
   EXPECT_NE(html.find("<polyline"), std::string::npos);
 

@@ -1,8 +1,11 @@
 #pragma once
 // Small random scenes for the rasterizer tests, in any scalar type.
+#include <algorithm>
 #include <cmath>
 #include <random>
 #include <vector>
+
+#include <gtest/gtest.h>
 
 #include "d2gs/render/cpu/cpu_rasterizer.hpp"
 
@@ -121,6 +124,32 @@ TestModel<T> random_model(const render::CameraParams<T>& cam, int n, unsigned se
     m.multiplier.push_back(T(i % 7 == 3 ? 0.5 : 1.0));
   }
   return m;
+}
+
+// Relative L2 difference of a float array from its double reference.
+inline double rel_l2(const std::vector<float>& a, const std::vector<double>& ref) {
+  double num = 0, den = 0;
+  for (std::size_t i = 0; i < ref.size(); ++i) {
+    const double d = double(a[i]) - ref[i];
+    num += d * d;
+    den += ref[i] * ref[i];
+  }
+  return std::sqrt(num / std::max(den, 1e-300));
+}
+
+// A float image against the double renderer's: mean absolute difference below 1e-5, and at most 1 value in
+// 200 off by more than 1e-4 (pixels where float and double decide a cutoff differently).
+inline void expect_image_close_to_double(const std::vector<float>& f, const std::vector<double>& d) {
+  double mean = 0;
+  std::size_t far = 0;
+  for (std::size_t i = 0; i < d.size(); ++i) {
+    const double e = std::abs(double(f[i]) - d[i]);
+    mean += e;
+    far += e > 1e-4;
+  }
+  mean /= double(d.size());
+  EXPECT_LT(mean, 1e-5);
+  EXPECT_LE(far, d.size() / 200);
 }
 
 }  // namespace d2gs::test

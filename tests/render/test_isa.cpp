@@ -40,16 +40,6 @@ FloatRun run_float(const TestModel<float>& m, const render::CameraParams<float>&
   return r;
 }
 
-double rel_l2(const std::vector<float>& a, const std::vector<double>& ref) {
-  double num = 0, den = 0;
-  for (std::size_t i = 0; i < ref.size(); ++i) {
-    const double d = double(a[i]) - ref[i];
-    num += d * d;
-    den += ref[i] * ref[i];
-  }
-  return std::sqrt(num / std::max(den, 1e-300));
-}
-
 TEST(RenderIsa, BaselineIsAlwaysAvailableAndUnknownLevelsAreRejected) {
   IsaGuard guard;
   const auto isas = render::cpu::available_tile_isas();
@@ -83,16 +73,7 @@ TEST(RenderIsa, EveryLevelMatchesDoubleReference) {
     SCOPED_TRACE(isa);
     render::cpu::select_tile_isa(isa);
     FloatRun f = run_float(mf, camf);
-    double mean = 0;
-    std::size_t far = 0;
-    for (std::size_t i = 0; i < od.rgb.size(); ++i) {
-      const double e = std::abs(double(f.rgb[i]) - od.rgb[i]);
-      mean += e;
-      far += e > 1e-4;
-    }
-    mean /= double(od.rgb.size());
-    EXPECT_LT(mean, 1e-5);
-    EXPECT_LE(far, od.rgb.size() / 200);
+    expect_image_close_to_double(f.rgb, od.rgb);
     EXPECT_LT(rel_l2(f.depth, od.depth), 1e-4);
     auto af = f.grads.arrays();
     auto ad = gd.arrays();

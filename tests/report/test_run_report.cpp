@@ -13,11 +13,7 @@ namespace d2gs::report {
 namespace {
 namespace fs = std::filesystem;
 
-std::size_t count(const std::string& s, const std::string& what) {
-  std::size_t n = 0;
-  for (std::size_t p = 0; (p = s.find(what, p)) != std::string::npos; p += what.size()) ++n;
-  return n;
-}
+using test::count_occurrences;
 
 TEST(RunData, TrainLogOfAResumedRunKeepsTheLastRecordOfEachIteration) {
   const auto dir = test::scratch_dir();
@@ -88,9 +84,9 @@ TEST(RunReport, PageHasEverySectionEmbeddedImagesAndEscapedNames) {
   EXPECT_NE(html.find("run &lt;a&amp;b&gt;"), std::string::npos);
   EXPECT_EQ(html.find("run <a&b>"), std::string::npos);
   // 2 views × (ground truth, render, error map), all embedded
-  EXPECT_EQ(count(html, "<img src=\"data:image/jpeg;base64,"), 6u);
-  EXPECT_EQ(count(html, "<img "), 6u);
-  EXPECT_EQ(count(html, "<svg "), 4u);  // loss, PSNR, #Gaussians, layers
+  EXPECT_EQ(count_occurrences(html, "<img src=\"data:image/jpeg;base64,"), 6u);
+  EXPECT_EQ(count_occurrences(html, "<img "), 6u);
+  EXPECT_EQ(count_occurrences(html, "<svg "), 4u);  // loss, PSNR, #Gaussians, layers
   EXPECT_NE(html.find("15.25"), std::string::npos);            // mean PSNR
   EXPECT_NE(html.find("dropgaussian · 15.00 dB"), std::string::npos);
   EXPECT_NE(html.find("Unavailable in results.json: LPIPS, AVGE"), std::string::npos);
@@ -139,7 +135,7 @@ TEST(ReportCli, TrainAndEvalWriteTheRunReport) {
                                "' -r 8 --n-views 3 --iterations 3 --init sfm-all-views --quiet");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   const std::string html = read_file(dir / "run/report.html");
-  EXPECT_EQ(count(html, "<img src=\"data:image/jpeg;base64,"), 9u);  // fern: 3 test views
+  EXPECT_EQ(count_occurrences(html, "<img src=\"data:image/jpeg;base64,"), 9u);  // fern: 3 test views
   EXPECT_NE(html.find("ORACLE"), std::string::npos);                   // sfm-all-views init is labelled
   fs::remove(dir / "run/report.html");
   const auto e = test::run_cli("eval -m '" + (dir / "run").string() + "'");

@@ -3,15 +3,12 @@
 
 #include "d2gs/report/svg_chart.hpp"
 #include "fake_run.hpp"
+#include "test_paths.hpp"
 
 namespace d2gs::report {
 namespace {
 
-std::size_t count(const std::string& s, const std::string& what) {
-  std::size_t n = 0;
-  for (std::size_t p = 0; (p = s.find(what, p)) != std::string::npos; p += what.size()) ++n;
-  return n;
-}
+using test::count_occurrences;
 
 TEST(SvgChart, NiceTicks) {
   EXPECT_EQ(nice_ticks(0, 10, 5), (std::vector<double>{0, 2, 4, 6, 8, 10}));
@@ -31,11 +28,11 @@ TEST(SvgChart, LineChartDrawsEveryFinitePointAndEscapesNames) {
   c.series.push_back({"d2gs", {1, 4}, {0.6, 0.1}, true});
   const std::string svg = svg_line_chart(c);
   EXPECT_EQ(test::check_balanced(svg), "") << svg;
-  EXPECT_EQ(count(svg, "<polyline"), 2u);
-  EXPECT_EQ(count(svg, "<circle"), 2u);  // markers of the second series only
+  EXPECT_EQ(count_occurrences(svg, "<polyline"), 2u);
+  EXPECT_EQ(count_occurrences(svg, "<circle"), 2u);  // markers of the second series only
   const std::size_t p = svg.find("points=\"");
   const std::string pts = svg.substr(p + 8, svg.find('"', p + 8) - p - 8);
-  EXPECT_EQ(count(pts, ","), 3u);  // the NaN point is skipped
+  EXPECT_EQ(count_occurrences(pts, ","), 3u);  // the NaN point is skipped
   EXPECT_NE(svg.find("3dgs &amp; co"), std::string::npos);
   EXPECT_NE(svg.find("loss &lt;train&gt;"), std::string::npos);
   EXPECT_EQ(svg.find("no data"), std::string::npos);
@@ -46,7 +43,7 @@ TEST(SvgChart, LogAxisSkipsNonPositiveValuesAndEmptyChartSaysSo) {
   c.series.push_back({"", {1, 2, 3}, {0.0, 0.3, 0.25}, false});
   const std::string svg = svg_line_chart(c);
   const std::size_t p = svg.find("points=\"");
-  EXPECT_EQ(count(svg.substr(p, svg.find("\"", p + 8) - p), ","), 2u);
+  EXPECT_EQ(count_occurrences(svg.substr(p, svg.find("\"", p + 8) - p), ","), 2u);
   EXPECT_NE(svg.find(">0.3<"), std::string::npos) << svg;  // linear ticks within one decade
   LineChart empty{"nothing", "x", "y", {}, false};
   empty.series.push_back({"a", {}, {}, false});
@@ -59,7 +56,7 @@ TEST(SvgChart, BarChartHasOneBarPerSeriesAndCategory) {
   b.series.push_back({"d2gs", {}, {20, 20, 20}, false});
   const std::string svg = svg_bar_chart(b);
   EXPECT_EQ(test::check_balanced(svg), "") << svg;
-  EXPECT_EQ(count(svg, "<title>"), 6u);
+  EXPECT_EQ(count_occurrences(svg, "<title>"), 6u);
   EXPECT_NE(svg.find("<title>3dgs / near: 30</title>"), std::string::npos);
 }
 
