@@ -2,6 +2,10 @@
 // determinism, resume and the output layout.
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <fstream>
+#include <map>
+
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
@@ -170,6 +174,37 @@ TEST(Trainer, DefaultInitIsTheTrainingViewsGeometryWithStereoDepthPriors) {
   EXPECT_FALSE(ts.init_is_oracle());
   EXPECT_GT(ts.model().size(), 100u);
   EXPECT_LT(ts.model().size(), 5000u);
+}
+
+TEST(Trainer, SavesAndTestsBeforeTheIterationsOpacityReset) {
+  // As the original train.py: the model saved and scored at iteration t is the one before t's densification,
+  // opacity reset and optimiser step. After a reset every opacity is <= 0.01 and the test PSNR collapses.
+  const auto dir = test::scratch_dir();
+  auto cfg = fern_config(dir / "run", Method::Gs3d, 6);
+  cfg.opacity_reset_at = {3};
+  cfg.densify_from = 1000;
+  cfg.save_iterations = {2, 3, 6};
+  cfg.test_iterations = {2, 3, 4};
+  Trainer trainer(cfg);
+  trainer.run();
+  const auto opacity_max = [&](int it) {
+    const Gaussians g = read_gaussians_ply(dir / fmt::format("run/point_cloud/iteration_{}/point_cloud.ply", it));
+    float mx = -1e30f;
+    for (float logit : g.opacity_logits) mx = std::max(mx, logit);
+    return 1.0f / (1.0f + std::exp(-mx));
+  };
+  EXPECT_GT(opacity_max(3), 0.05f);  // saved before the reset of iteration 3
+  EXPECT_NEAR(opacity_max(3), opacity_max(2), 0.02f);
+  EXPECT_LT(opacity_max(6), 0.012f);  // the reset shows from iteration 4 on (three small steps later)
+  std::map<int, double> psnr;
+  std::ifstream log(dir / "run/train_log.jsonl");
+  for (std::string line; std::getline(log, line);) {
+    const auto j = nlohmann::json::parse(line);
+    if (j.value("event", "") == "test") psnr[j["iteration"].get<int>()] = j["psnr"].get<double>();
+  }
+  ASSERT_EQ(psnr.size(), 3u);
+  EXPECT_NEAR(psnr[3], psnr[2], 0.5);  // the reset has not happened yet when iteration 3 is scored
+  EXPECT_LT(psnr[4], psnr[3] - 0.5);   // it has when iteration 4 is
 }
 
 TEST(Trainer, RunFolderServesEvalAndImrCommands) {

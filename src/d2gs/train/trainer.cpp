@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <functional>
 #include <set>
 
 #include <nlohmann/json.hpp>
@@ -150,6 +151,9 @@ struct Trainer::State {
   std::vector<float> multiplier, pred, grad_rgb, dd_probabilities;
   Clock::time_point started = Clock::now();
   std::ofstream log;
+  // Called by step() after the backward pass and before densification, the opacity reset and the optimiser
+  // step, where the original train.py reports test metrics and saves the model: run() saves and evaluates here.
+  std::function<void(int)> before_update;
 
   double elapsed() const { return elapsed_before + std::chrono::duration<double>(Clock::now() - started).count(); }
   fs::path out() const { return cfg.model_dir; }
@@ -460,6 +464,8 @@ IterationRecord Trainer::step() {
     check(grads.model.sh_rest, "sh_rest");
   }
 
+  if (s.before_update) s.before_update(t);
+
   // Densification (before the optimiser step, as the original).
   bool skip_step = false, skip_opacity = false;
   if (t < cfg.densify_until) {
@@ -540,19 +546,27 @@ void Trainer::run() {
   auto last_print = t0;
   int last_decile = -1;
   double ema_loss = 0.0;
-  while (s.iteration < cfg.iterations) {
-    const IterationRecord rec = step();
-    const int t = rec.iteration;
-    ema_loss = t == start + 1 ? rec.loss : 0.6 * rec.loss + 0.4 * ema_loss;
+  // Saves and test metrics at iteration t see the model before that iteration's densification, opacity reset
+  // and optimiser step, as in the original (a test right after an opacity reset would score a faded model).
+  struct ClearHook {
+    std::function<void(int)>& hook;
+    ~ClearHook() { hook = nullptr; }  // it captures this frame's locals
+  } clear_hook{s.before_update};
+  s.before_update = [&](int t) {
     if (saves.count(t)) {
       write_gaussians_ply(s.out() / "point_cloud" / fmt::format("iteration_{}", t) / "point_cloud.ply", s.model);
     }
-    if (checkpoints.count(t)) save_checkpoint(s.out() / fmt::format("chkpnt{}.bin", t));
     if (tests.count(t)) {
       const auto e = evaluate_test_views();
       s.log << nlohmann::json{{"event", "test"}, {"iteration", t}, {"psnr", e.psnr}, {"ssim", e.ssim}}.dump() << '\n';
       if (!cfg.quiet) spdlog::info("iteration {}: test PSNR {:.3f} SSIM {:.4f}", t, e.psnr, e.ssim);
     }
+  };
+  while (s.iteration < cfg.iterations) {
+    const IterationRecord rec = step();
+    const int t = rec.iteration;
+    ema_loss = t == start + 1 ? rec.loss : 0.6 * rec.loss + 0.4 * ema_loss;
+    if (checkpoints.count(t)) save_checkpoint(s.out() / fmt::format("chkpnt{}.bin", t));
     if (!cfg.quiet) {
       const auto now = Clock::now();
       const double secs = std::chrono::duration<double>(now - t0).count();
