@@ -63,6 +63,18 @@ TEST(ImrCli, PlyFilesAndRunFoldersAgreeWithTheLibrary) {
     EXPECT_TRUE(j["pairs"][k]["converged"].get<bool>());
   }
   EXPECT_EQ(j["models"][1]["components"].get<std::size_t>(), mixtures[1].size());
+
+  // ε-scaling is the default; without it the solver reaches the same plan from ε itself.
+  EXPECT_TRUE(j["options"]["epsilon_scaling"].get<bool>());
+  const auto plain = test::run_cli("imr '" + (dir / "a.ply").string() + "' '" + (dir / "c.ply").string() + "' -s '" +
+                                   fern.string() + "' -r 8 --samples 300 --no-epsilon-scaling --json '" +
+                                   (dir / "plain.json").string() + "'");
+  ASSERT_EQ(plain.exit_code, 0) << plain.output;
+  std::ifstream in_plain(dir / "plain.json");
+  const nlohmann::json p = nlohmann::json::parse(in_plain);
+  EXPECT_FALSE(p["options"]["epsilon_scaling"].get<bool>());
+  const double scaled_cost = expected.pairs[1].transport.transport_cost;  // pair (a, c)
+  EXPECT_NEAR(p["pairs"][0]["transport_cost"].get<double>(), scaled_cost, 1e-4 * scaled_cost);
 }
 
 TEST(ImrCli, WarnsWithoutSceneAndRejectsBadInput) {

@@ -78,6 +78,8 @@ TEST(ExperimentRuns, TwoMethodsTwoSeedsInParallelThenSkipped) {
   const auto imr = nlohmann::json::parse(read_file(dir / "exp/imr/fern__3v__3dgs.json"));
   EXPECT_TRUE(std::isfinite(imr["imr"].get<double>()));
   EXPECT_EQ(imr["models"].size(), 2u);
+  EXPECT_TRUE(imr["solver"]["epsilon_scaling"].get<bool>());  // the cache is keyed by the solver settings too
+  EXPECT_TRUE(imr["pairs"][0]["converged"].get<bool>());
   const std::string html = read_file(dir / "exp/report.html");
   EXPECT_EQ(count_occurrences(html, "<img src=\"data:image/jpeg;base64,"), 3u * 5u);  // 3 views × (GT + 2 renders + 2 errors)
   EXPECT_NE(html.find("<section id=\"imr\">"), std::string::npos);

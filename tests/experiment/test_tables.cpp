@@ -25,6 +25,16 @@ TEST(Tables, MeanAndSampleStd) {
   EXPECT_EQ(csv_field("plain"), "plain");
 }
 
+TEST(Tables, ImrCellSaysWhenASolveDidNotConverge) {
+  GroupRow row;
+  row.label = "d2gs";
+  EXPECT_EQ(table_cells(row)[5], "—");
+  row.imr = 3.1004;
+  EXPECT_EQ(table_cells(row)[5], "3.100");
+  row.imr_note = "1 Sinkhorn problem(s) stopped at the iteration limit before converging";
+  EXPECT_EQ(table_cells(row)[5], "3.100 (not converged)");
+}
+
 // Two scenes × 3 views × (3dgs, d2gs-full) × seeds 0, 1; d2gs has LPIPS, one 3dgs run of scene b is missing.
 struct Fixture {
   fs::path dir;

@@ -91,7 +91,8 @@ std::vector<std::string> table_cells(const GroupRow& row) {
     return it == row.metrics.end() ? std::string("—") : format_stat(it->second, places);
   };
   for (const char* m : kMetrics) cells.push_back(stat(m, decimals(m)));
-  cells.push_back(row.imr ? fmt::format("{:.3f}", *row.imr) : "—");
+  // With a value, a note can only say that a Sinkhorn problem stopped before converging.
+  cells.push_back(row.imr ? fmt::format("{:.3f}{}", *row.imr, row.imr_note.empty() ? "" : " (not converged)") : "—");
   cells.push_back(stat("GAUSSIANS", 0));
   cells.push_back(stat("TRAIN_SECONDS", 1));
   cells.push_back(fmt::format("{}/{}", row.runs_finished, row.runs_total));

@@ -28,7 +28,7 @@ struct GroupRow {
   int runs_total = 0, runs_finished = 0;
   std::map<std::string, Stat> metrics;  // PSNR, SSIM, LPIPS, AVGE (when present), GAUSSIANS, TRAIN_SECONDS
   std::optional<double> imr;
-  std::string imr_note;  // why IMR is missing
+  std::string imr_note;  // why IMR is missing, or (with a value) that a Sinkhorn problem did not converge
 };
 
 // Reads results.json of every finished run and groups them (order: scene, views, then the methods'
