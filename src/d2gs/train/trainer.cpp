@@ -468,7 +468,9 @@ IterationRecord Trainer::step() {
 
   // Densification (before the optimiser step, as the original).
   bool skip_step = false, skip_opacity = false;
-  if (t < cfg.densify_until) {
+  // Nothing changes the model after the last iteration's save, so the final evaluation scores the saved model
+  // (train.py would still densify there, after saving, to no effect on anything it writes).
+  if (t < cfg.densify_until && t < cfg.iterations) {
     s.stats.add(grads.grad_mean2d_ndc, out.radii);
     if (t > cfg.densify_from && t % cfg.densify_every == 0) {
       const auto report = densify_and_prune(s.model, s.adam, s.stats, s.extent, cfg.densify, s.rng_densify);
