@@ -73,7 +73,8 @@ Run add_train_command(CLI::App& app) {
   auto scene_preset = std::make_shared<std::string>();
   cmd->add_option("--preset", *preset,
                   "D²GS preset: 'paper' (the paper's formulas and constants) or 'release' (the authors' code, quirks "
-                  "included); individual flags override it")
+                  "included; its values are the defaults, chosen by measurement: docs/training.md); individual "
+                  "flags override it")
       ->check(CLI::IsMember({"paper", "release"}));
   cmd->add_option("--scene-preset", *scene_preset,
                   "D²GS per-scene values of the release, e.g. fern, llff/room, mipnerf360/bicycle (weights, rates, "

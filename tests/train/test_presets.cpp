@@ -8,6 +8,15 @@ namespace {
 
 TEST(Presets, PaperAndRelease) {
   TrainConfig c;
+  // The defaults are the release preset's values (chosen by measurement, docs/training.md).
+  EXPECT_EQ(c.dd_drop.depth_mode, DepthMode::ReleaseDot);
+  EXPECT_TRUE(c.release_density_cache);
+  EXPECT_DOUBLE_EQ(c.dd_drop.weight_depth, 0.3);
+  EXPECT_DOUBLE_EQ(c.dd_drop.weight_density, 0.7);
+  EXPECT_DOUBLE_EQ(c.dd_drop.rate_min, 0.05);
+  EXPECT_DOUBLE_EQ(c.dd_drop.rate_max, 0.3);
+  EXPECT_EQ(c.dafe_loss_form, DafeLossForm::Release);
+  apply_d2gs_preset(c, "paper");
   apply_d2gs_preset(c, "release");
   EXPECT_EQ(c.dd_drop.depth_mode, DepthMode::ReleaseDot);
   EXPECT_TRUE(c.release_density_cache);

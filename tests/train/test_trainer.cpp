@@ -239,7 +239,7 @@ TEST(TrainConfig, JsonRoundTripAndUnknownKeys) {
   c.model_dir = "m";
   c.method = Method::D2gs;
   c.dd_drop.weight_depth = 0.7;
-  c.dafe_loss_form = DafeLossForm::Release;
+  c.dafe_loss_form = DafeLossForm::Paper;  // not the default
   c.opacity_reset_at = {100};
   nlohmann::json j;
   to_json(j, c);

@@ -55,18 +55,20 @@ struct TrainConfig {
   // DropGaussian
   double dropgaussian_max_rate = 0.2;
 
-  // D²GS: DD-Drop and DAFE (presets.hpp sets groups of these; the names are kept for the record)
-  std::string preset;        // "paper", "release" or empty
+  // D²GS: DD-Drop and DAFE (presets.hpp sets groups of these; the names are kept for the record).
+  // The defaults are the release preset's values, chosen by measurement on fern (docs/training.md, "Which
+  // D²GS preset"); --preset paper switches to the paper's formulas and constants.
+  std::string preset;        // "paper", "release" or empty (= the defaults, i.e. the release's values)
   std::string scene_preset;  // e.g. "llff/fern", or empty
-  DdDropOptions dd_drop;
+  DdDropOptions dd_drop = {.weight_depth = 0.3, .weight_density = 0.7, .depth_mode = DepthMode::ReleaseDot};
   int density_refresh_every = 500;
-  bool release_density_cache = false;  // the release's quirk (see method.md §4)
+  bool release_density_cache = true;  // the release's quirk (see method.md §4)
   bool dafe = true;
   std::string dafe_prior_dir;          // folder of per-view depth/disparity maps; "stereo": the init's depths
   PriorKind dafe_prior_kind = PriorKind::Disparity;
   DafeMaskRule dafe_mask_rule = DafeMaskRule::Percentile;
   double dafe_tau = 5.0;               // percent (percentile rule) or fraction (threshold rule)
-  DafeLossForm dafe_loss_form = DafeLossForm::Paper;
+  DafeLossForm dafe_loss_form = DafeLossForm::Release;
   float dafe_lambda = 1.0f;
 
   // outputs
