@@ -1,8 +1,9 @@
 #include <gtest/gtest.h>
 
-#include <cmath>
 #include <algorithm>
+#include <cmath>
 #include <numeric>
+#include <random>
 
 #include "d2gs/train/dropout.hpp"
 
@@ -24,6 +25,24 @@ TEST(DropGaussian, RateScheduleAndCompensation) {
   }
   // Binomial(n, 0.2): sd = sqrt(n·0.16) ≈ 126.
   EXPECT_NEAR(static_cast<double>(dropped), 0.2 * n, 5 * 126.0);
+}
+
+TEST(DdDrop, LayersMatchTheSortedRanksOnShuffledInputWithTies) {
+  // Thresholds are the values at ranks ⌊0.33·N⌋ and ⌊0.67·N⌋ of the sorted depths, for any input order.
+  for (std::size_t n : {1u, 2u, 3u, 10u, 1000u, 40001u}) {
+    std::mt19937 rng(static_cast<unsigned>(n));
+    std::uniform_int_distribution<int> pick(0, 50);  // many ties
+    std::vector<float> depth(n);
+    for (auto& d : depth) d = 0.1f * static_cast<float>(pick(rng));
+    std::vector<float> sorted = depth;
+    std::sort(sorted.begin(), sorted.end());
+    const float t1 = sorted[std::min(n - 1, static_cast<std::size_t>(0.33 * static_cast<double>(n)))];
+    const float t2 = sorted[std::min(n - 1, static_cast<std::size_t>(0.67 * static_cast<double>(n)))];
+    const auto layers = depth_layers(depth);
+    ASSERT_EQ(layers.size(), n);
+    for (std::size_t i = 0; i < n; ++i)
+      ASSERT_EQ(layers[i], depth[i] < t1 ? 0 : depth[i] < t2 ? 1 : 2) << "n = " << n << ", i = " << i;
+  }
 }
 
 TEST(DdDrop, ScoresLayersAndProbabilitiesOnAHandComputedCase) {

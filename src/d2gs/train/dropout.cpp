@@ -52,10 +52,16 @@ std::vector<std::uint8_t> depth_layers(const std::vector<float>& depths) {
   const std::size_t n = depths.size();
   std::vector<std::uint8_t> layer(n, 0);
   if (n == 0) return layer;
-  std::vector<float> sorted = depths;
-  std::sort(sorted.begin(), sorted.end());
-  const float t1 = sorted[std::min(n - 1, static_cast<std::size_t>(0.33 * static_cast<double>(n)))];
-  const float t2 = sorted[std::min(n - 1, static_cast<std::size_t>(0.67 * static_cast<double>(n)))];
+  // The ranks ⌊0.33·N⌋ and ⌊0.67·N⌋ of the sorted depths, by selection (every iteration: a full sort of
+  // ~40k depths cost ~2.5 ms); after the first selection everything from k1 on is ≥ it, so k2 ≥ k1 is there.
+  const std::size_t k1 = std::min(n - 1, static_cast<std::size_t>(0.33 * static_cast<double>(n)));
+  const std::size_t k2 = std::min(n - 1, static_cast<std::size_t>(0.67 * static_cast<double>(n)));
+  std::vector<float> work = depths;
+  std::nth_element(work.begin(), work.begin() + static_cast<std::ptrdiff_t>(k1), work.end());
+  const float t1 = work[k1];
+  std::nth_element(work.begin() + static_cast<std::ptrdiff_t>(k1), work.begin() + static_cast<std::ptrdiff_t>(k2),
+                   work.end());
+  const float t2 = work[k2];
   for (std::size_t i = 0; i < n; ++i) layer[i] = depths[i] < t1 ? 0 : depths[i] < t2 ? 1 : 2;
   return layer;
 }
