@@ -56,9 +56,11 @@ d2gs::GaussianMixture mixture(std::size_t n, unsigned seed, const char* prefix) 
 void BM_ImrPair(benchmark::State& state) {
   const auto n = static_cast<std::size_t>(state.range(0));
   const auto storage = static_cast<d2gs::CostStorage>(state.range(1));
+  const bool scaling = state.range(2) != 0;
   const d2gs::GaussianMixture a = mixture(n, 1, "a"), b = mixture(n, 2, "b");
-  d2gs::ImrOptions options;
+  d2gs::ImrOptions options;  // the defaults of d2gs imr
   options.storage = storage;
+  options.sinkhorn.epsilon_scaling = scaling;
   d2gs::TransportResult t;
   for (auto _ : state) {
     t = d2gs::mixture_transport(a, b, options);
@@ -67,13 +69,16 @@ void BM_ImrPair(benchmark::State& state) {
   state.counters["marginal_err"] = t.marginal_error;
   state.counters["converged"] = t.converged;
   std::fprintf(stderr, "S = %.10g (scale %.10g, normalised %.10g)\n", t.transport_cost, t.scale, t.normalized_cost);
-  state.SetLabel(d2gs::to_string(storage));
+  state.SetLabel(std::string(d2gs::to_string(storage)) + (scaling ? ", eps-scaling" : ", plain"));
 }
 
+// (n, storage, ε-scaling): every storage with the default ε-scaling, and the stored float cost without it.
 void args(benchmark::internal::Benchmark* b) {
-  for (const int n : {2000, 10000})
+  for (const int n : {2000, 10000}) {
     for (const auto s : {d2gs::CostStorage::StoredFloat, d2gs::CostStorage::StoredDouble, d2gs::CostStorage::OnTheFly})
-      b->Args({n, static_cast<int>(s)});
+      b->Args({n, static_cast<int>(s), 1});
+    b->Args({n, static_cast<int>(d2gs::CostStorage::StoredFloat), 0});
+  }
 }
 
 BENCHMARK(BM_ImrPair)->Apply(args)->Unit(benchmark::kSecond)->Iterations(1)->UseRealTime();
