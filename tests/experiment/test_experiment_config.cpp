@@ -62,8 +62,12 @@ TEST(ExperimentConfig, AblationExampleMirrorsThePaperTable) {
   const auto& full = find(runs, "d2gs-full", 2).train_config;
   EXPECT_EQ(full["dafe"], true);
   EXPECT_EQ(full["dd_use_layers"], true);
-  EXPECT_EQ(full["preset"], "paper");
-  EXPECT_DOUBLE_EQ(full["dd_weight_depth"].get<double>(), 0.5);
+  // The default D²GS settings: the release preset with fern's values.
+  EXPECT_EQ(full["preset"], "release");
+  EXPECT_EQ(full["scene_preset"], "llff/fern");
+  EXPECT_DOUBLE_EQ(full["dd_weight_depth"].get<double>(), 0.7);
+  EXPECT_DOUBLE_EQ(full["dafe_tau"].get<double>(), 10.0);
+  EXPECT_EQ(full["dafe_loss_form"], "release");
   EXPECT_EQ(find(runs, "3dgs-baseline", 0).dir, fs::path("runs/fern/3v/3dgs-baseline/seed0"));
 }
 
