@@ -33,15 +33,16 @@ struct ImrCommandOptions {
   std::string source;
   int resolution = 1;
   int reference_camera = 0;
-  double epsilon = 0.1;
-  std::size_t samples = 10000;
-  double tolerance = 1e-4;
-  int max_iterations = 10000;
+  // The library's defaults (ImrOptions), so help text and behaviour cannot drift from them.
+  double epsilon = ImrOptions{}.sinkhorn.epsilon;
+  std::size_t samples = ImrOptions{}.mixture.samples;
+  double tolerance = ImrOptions{}.sinkhorn.tolerance;
+  int max_iterations = ImrOptions{}.sinkhorn.max_iterations;
   bool exact_bures = false;
   bool debiased = false;
   bool no_clamp = false;
   bool no_normalize = false;
-  bool epsilon_scaling = true;
+  bool epsilon_scaling = ImrOptions{}.sinkhorn.epsilon_scaling;
   int threads = 0;
   std::string cost = "stored";
   std::string json;

@@ -85,7 +85,7 @@ struct SinkhornOptions {
   bool double_exp = false;
   // Called after every iteration with the iteration count so far (over all ε stages), that iteration's
   // change and the tolerance of the current stage: progress for long solves. Not called when empty.
-  std::function<void(int iteration, double change, double tolerance)> on_iteration;
+  std::function<void(int iteration, double change, double tolerance)> on_iteration = nullptr;
 };
 
 struct SinkhornResult {

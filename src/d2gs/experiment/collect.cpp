@@ -49,7 +49,9 @@ void group_imr(GroupRow& row, const std::vector<const RunSpec*>& members, const 
                                  {"tolerance", o.sinkhorn.tolerance},
                                  {"max_iterations", o.sinkhorn.max_iterations},
                                  {"epsilon_scaling", o.sinkhorn.epsilon_scaling}};
-  const auto note_unconverged = [&row](int unconverged) {
+  const auto note_unconverged = [&row](const nlohmann::json& pairs) {
+    int unconverged = 0;
+    for (const auto& p : pairs) unconverged += p.at("converged").get<bool>() ? 0 : 1;
     if (unconverged > 0)
       row.imr_note = fmt::format("{} Sinkhorn problem(s) stopped at the iteration limit before converging", unconverged);
   };
@@ -60,9 +62,7 @@ void group_imr(GroupRow& row, const std::vector<const RunSpec*>& members, const 
       if (j.at("models") == identity && j.at("samples").get<std::size_t>() == config.imr_samples &&
           j.at("solver") == solver) {
         row.imr = j.at("imr").get<double>();
-        int unconverged = 0;
-        for (const auto& p : j.at("pairs")) unconverged += p.at("converged").get<bool>() ? 0 : 1;
-        note_unconverged(unconverged);
+        note_unconverged(j.at("pairs"));
         return;
       }
     } catch (const nlohmann::json::exception&) {
@@ -82,17 +82,14 @@ void group_imr(GroupRow& row, const std::vector<const RunSpec*>& members, const 
   const ImrResult result = compute_imr(mixtures, o);
   row.imr = result.imr;
   nlohmann::json pairs = nlohmann::json::array();
-  int unconverged = 0;
-  for (const auto& p : result.pairs) {
+  for (const auto& p : result.pairs)
     pairs.push_back({{"a", p.a},
                      {"b", p.b},
                      {"distance", p.distance},
                      {"iterations", p.transport.iterations},
                      {"seconds", p.transport.seconds},
                      {"converged", p.transport.converged}});
-    unconverged += p.transport.converged ? 0 : 1;
-  }
-  note_unconverged(unconverged);
+  note_unconverged(pairs);
   const nlohmann::json out = {{"models", identity},
                               {"samples", config.imr_samples},
                               {"solver", solver},

@@ -32,14 +32,16 @@ void apply_d2gs_preset(TrainConfig& c, const std::string& preset) {
     c.dafe_loss_form = DafeLossForm::Paper;
     c.dafe_lambda = 1.0f;
   } else if (preset == "release") {
-    c.dd_drop.depth_mode = DepthMode::ReleaseDot;
-    c.release_density_cache = true;
-    c.dd_drop.weight_depth = 0.3;
-    c.dd_drop.weight_density = 0.7;
-    c.dd_drop.rate_min = 0.05;
-    c.dd_drop.rate_max = 0.3;
-    c.dafe_mask_rule = DafeMaskRule::Percentile;
-    c.dafe_loss_form = DafeLossForm::Release;
+    // The release's values are TrainConfig's defaults (config.hpp): restore them.
+    const TrainConfig d;
+    c.dd_drop.depth_mode = d.dd_drop.depth_mode;
+    c.release_density_cache = d.release_density_cache;
+    c.dd_drop.weight_depth = d.dd_drop.weight_depth;
+    c.dd_drop.weight_density = d.dd_drop.weight_density;
+    c.dd_drop.rate_min = d.dd_drop.rate_min;
+    c.dd_drop.rate_max = d.dd_drop.rate_max;
+    c.dafe_mask_rule = d.dafe_mask_rule;
+    c.dafe_loss_form = d.dafe_loss_form;
   } else {
     fail("unknown D2GS preset '{}' (expected paper or release)", preset);
   }

@@ -7,7 +7,6 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
-#include <functional>
 #include <set>
 
 #include <nlohmann/json.hpp>
@@ -151,9 +150,9 @@ struct Trainer::State {
   std::vector<float> multiplier, pred, grad_rgb, dd_probabilities;
   Clock::time_point started = Clock::now();
   std::ofstream log;
-  // Called by step() after the backward pass and before densification, the opacity reset and the optimiser
-  // step, where the original train.py reports test metrics and saves the model: run() saves and evaluates here.
-  std::function<void(int)> before_update;
+  // Set by run(): step() then saves the model and scores the test views at the configured iterations, after the
+  // backward pass and before densification, the opacity reset and the optimiser step, where train.py does.
+  bool outputs = false;
 
   double elapsed() const { return elapsed_before + std::chrono::duration<double>(Clock::now() - started).count(); }
   fs::path out() const { return cfg.model_dir; }
@@ -464,7 +463,7 @@ IterationRecord Trainer::step() {
     check(grads.model.sh_rest, "sh_rest");
   }
 
-  if (s.before_update) s.before_update(t);
+  if (s.outputs) save_and_test(t);
 
   // Densification (before the optimiser step, as the original).
   bool skip_step = false, skip_opacity = false;
@@ -535,35 +534,32 @@ EvalSummary Trainer::evaluate_test_views(const fs::path& render_dir) const {
   return evaluate_views(s_->model, s_->scene, s_->split.test, eo);
 }
 
+// Saves and test metrics at iteration t see the model before that iteration's densification, opacity reset and
+// optimiser step, as in the original (a test right after an opacity reset would score a faded model).
+void Trainer::save_and_test(int t) {
+  auto& s = *s_;
+  const auto& cfg = s.cfg;
+  const auto listed = [t](const std::vector<int>& at) { return std::find(at.begin(), at.end(), t) != at.end(); };
+  if (cfg.save_iterations.empty() ? t == cfg.iterations : listed(cfg.save_iterations))
+    write_gaussians_ply(s.out() / "point_cloud" / fmt::format("iteration_{}", t) / "point_cloud.ply", s.model);
+  if (listed(cfg.test_iterations)) {
+    const auto e = evaluate_test_views();
+    s.log << nlohmann::json{{"event", "test"}, {"iteration", t}, {"psnr", e.psnr}, {"ssim", e.ssim}}.dump() << '\n';
+    if (!cfg.quiet) spdlog::info("iteration {}: test PSNR {:.3f} SSIM {:.4f}", t, e.psnr, e.ssim);
+  }
+}
+
 void Trainer::run() {
   auto& s = *s_;
   const auto& cfg = s.cfg;
-  const std::set<int> saves = cfg.save_iterations.empty() ? std::set<int>{cfg.iterations}
-                                                          : std::set<int>(cfg.save_iterations.begin(), cfg.save_iterations.end());
   const std::set<int> checkpoints(cfg.checkpoint_iterations.begin(), cfg.checkpoint_iterations.end());
-  const std::set<int> tests(cfg.test_iterations.begin(), cfg.test_iterations.end());
   const bool tty = ::isatty(STDERR_FILENO) != 0;
   const int start = s.iteration;
   const auto t0 = Clock::now();
   auto last_print = t0;
   int last_decile = -1;
   double ema_loss = 0.0;
-  // Saves and test metrics at iteration t see the model before that iteration's densification, opacity reset
-  // and optimiser step, as in the original (a test right after an opacity reset would score a faded model).
-  struct ClearHook {
-    std::function<void(int)>& hook;
-    ~ClearHook() { hook = nullptr; }  // it captures this frame's locals
-  } clear_hook{s.before_update};
-  s.before_update = [&](int t) {
-    if (saves.count(t)) {
-      write_gaussians_ply(s.out() / "point_cloud" / fmt::format("iteration_{}", t) / "point_cloud.ply", s.model);
-    }
-    if (tests.count(t)) {
-      const auto e = evaluate_test_views();
-      s.log << nlohmann::json{{"event", "test"}, {"iteration", t}, {"psnr", e.psnr}, {"ssim", e.ssim}}.dump() << '\n';
-      if (!cfg.quiet) spdlog::info("iteration {}: test PSNR {:.3f} SSIM {:.4f}", t, e.psnr, e.ssim);
-    }
-  };
+  s.outputs = true;  // saves and test metrics, from step()
   while (s.iteration < cfg.iterations) {
     const IterationRecord rec = step();
     const int t = rec.iteration;
@@ -589,6 +585,7 @@ void Trainer::run() {
       }
     }
   }
+  s.outputs = false;
   if (!cfg.quiet && ::isatty(STDERR_FILENO)) std::fprintf(stderr, "\n");
   // Final evaluation on the held-out views, in the original render.py layout.
   if (!s.split.test.empty()) {

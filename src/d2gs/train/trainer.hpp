@@ -54,6 +54,8 @@ public:
   struct State;  // opaque: defined in trainer.cpp
 
 private:
+  void save_and_test(int iteration);  // run()'s outputs at `iteration`, called from step()
+
   std::unique_ptr<State> s_;
 };
 
