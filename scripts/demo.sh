@@ -4,5 +4,5 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ./scripts/setup.sh
-./scripts/build.sh
+./scripts/build.sh --target d2gs   # the program only; test.sh builds the tests and benchmarks
 build/d2gs demo -o demo "$@"
