@@ -52,7 +52,7 @@ Run add_train_command(CLI::App& app) {
       "Initial points: 'dense' (default: stereo depth of the training views fused, as `d2gs init`; reuses "
       "SCENE/{N}_views or MODEL/init), 'sparse' (SIFT points triangulated from the training views), a PLY file, "
       "'random', or 'sfm-all-views' (the dataset's points3D: an ORACLE, it saw the test views)");
-  opt("--random-points", d.random_points, "random_points", "Point count of --init random");
+  opt("--random-points", d.random_points, "random_points", "Point count of --init random (random pixel rays of the training views, uniform inverse depth within the scene's depth bounds: docs/training.md)");
   opt("--position-lr", d.lr.means, "position_lr", "Initial position learning rate (× scene extent)");
   opt("--position-lr-final", d.position_lr_final, "position_lr_final", "Final position learning rate (× extent)");
   opt("--sh-dc-lr", d.lr.sh_dc, "sh_dc_lr", "SH DC learning rate");

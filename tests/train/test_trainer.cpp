@@ -11,7 +11,9 @@
 
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
+#include "d2gs/core/npy.hpp"
 #include "d2gs/model/ply.hpp"
+#include "d2gs/train/initialize.hpp"
 #include "d2gs/train/trainer.hpp"
 #include "test_paths.hpp"
 
@@ -143,6 +145,20 @@ TEST(Trainer, RandomInitLiesInTheTrainingFrustaAndIsNotAnOracle) {
     }
   }
   EXPECT_EQ(seen, m.size());  // every point is on a pixel ray of some training view
+  // Its depth range is fern's LLFF bounds for the training views: poses_bounds.npy's near/far, which
+  // imgs2poses computed as the 0.1/99.9 percentiles of each image's track depths (ours: of the points
+  // that project into the image), so they agree closely but not exactly.
+  const RandomInitRange range = random_init_depth_range(t.scene(), t.split().train, t.scene_extent());
+  ASSERT_TRUE(range.from_dataset_points);
+  const NpyArray bounds = read_npy(test::shared_data() / "nerf_llff_data/fern/poses_bounds.npy");
+  ASSERT_EQ(bounds.shape.size(), 2u);
+  double llff_near = 1e30, llff_far = 0;
+  for (int v : t.split().train) {  // poses_bounds rows follow the sorted image names, as our cameras
+    llff_near = std::min(llff_near, bounds.values[static_cast<std::size_t>(v) * 17 + 15]);
+    llff_far = std::max(llff_far, bounds.values[static_cast<std::size_t>(v) * 17 + 16]);
+  }
+  EXPECT_NEAR(range.near / llff_near, 1.0, 0.08);  // measured: 16.98 … 81.51 against 17.54 … 78.72
+  EXPECT_NEAR(range.far / llff_far, 1.0, 0.08);
   // Another seed draws another cloud.
   auto cfg2 = cfg;
   cfg2.model_dir = (dir / "run2").string();

@@ -103,27 +103,6 @@ const char* kCheckpointMagic = "D2GSCKPT1\n";
 
 }  // namespace
 
-PointCloud random_point_cloud(const Scene& scene, const std::vector<int>& views, int count, float extent,
-                              std::uint64_t seed) {
-  // Each point: a random training view, a random pixel, a depth with uniform inverse depth between
-  // 0.5·E and 50·E (E = scene extent), so near and far regions of the frustum both get points.
-  Rng rng = Rng::stream(seed, "random-init");
-  PointCloud cloud;
-  cloud.positions.reserve(static_cast<std::size_t>(count));
-  const double inv_near = 1.0 / (0.5 * extent), inv_far = 1.0 / (50.0 * extent);
-  for (int i = 0; i < count; ++i) {
-    const Camera& cam = scene.cameras[static_cast<std::size_t>(views[rng.below(views.size())])];
-    const double px = rng.uniform() * cam.width, py = rng.uniform() * cam.height;
-    const double depth = 1.0 / (inv_far + rng.uniform() * (inv_near - inv_far));
-    const glm::dvec3 p_cam((px - cam.cx) / cam.fx * depth, (py - cam.cy) / cam.fy * depth, depth);
-    const glm::dvec3 p = cam.R_cam_to_world() * (p_cam - cam.t_world_to_cam);
-    cloud.positions.emplace_back(glm::vec3(p));
-    cloud.colors.emplace_back(static_cast<std::uint8_t>(rng.below(256)), static_cast<std::uint8_t>(rng.below(256)),
-                              static_cast<std::uint8_t>(rng.below(256)));
-  }
-  return cloud;
-}
-
 struct Trainer::State {
   TrainConfig cfg;
   Scene scene;
@@ -292,7 +271,12 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
     s.oracle_init = true;
     spdlog::warn("initialising from the dataset's all-view SfM points: an ORACLE (it saw the test views)");
   } else if (s.cfg.init == "random") {
-    init = random_point_cloud(s.scene, s.split.train, s.cfg.random_points, s.extent, s.cfg.seed);
+    const RandomInitRange range = random_init_depth_range(s.scene, s.split.train, s.extent);
+    spdlog::info("random init: {} points, inverse depth uniform between depths {:.3g} and {:.3g} ({})",
+                 s.cfg.random_points, range.near, range.far,
+                 range.from_dataset_points ? "the dataset's bounds: 0.1 and 99.9 % of its points' depths in the training views"
+                                           : "no dataset points: 0.5 and 50 scene extents");
+    init = random_point_cloud(s.scene, s.split.train, s.cfg.random_points, range, s.cfg.seed);
   } else {
     init = read_point_cloud_ply(s.cfg.init);
   }

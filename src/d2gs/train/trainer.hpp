@@ -59,10 +59,5 @@ private:
   std::unique_ptr<State> s_;
 };
 
-// Random initial cloud: `count` points in the region seen by the training cameras (each point on the ray
-// of a random pixel of a random training view, with inverse depth uniform between 1/(0.5·E) and 1/(50·E),
-// E = scene extent), random colours.
-PointCloud random_point_cloud(const Scene& scene, const std::vector<int>& train_views, int count, float extent,
-                              std::uint64_t seed);
 
 }  // namespace d2gs
