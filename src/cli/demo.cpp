@@ -163,7 +163,7 @@ Run add_demo_command(CLI::App& app) {
   auto* sub = app.add_subcommand(
       "demo",
       "Generate the built-in synthetic scene (ray-traced, LLFF layout, with true depth), train D²GS on 3 of its "
-      "views, evaluate the held-out views and write the HTML report (RUN = OUTPUT/run)");
+      "views with the default settings of d2gs train --method d2gs (the release preset), evaluate the held-out views and write the HTML report (RUN = OUTPUT/run)");
   sub->add_option("-o,--output", opt->output, "Folder to write (created; refused if it holds other data)")
       ->capture_default_str();
   sub->add_option("--seed", opt->seed, "Seed of the scene (layout jitter, colours, textures)")->capture_default_str();
