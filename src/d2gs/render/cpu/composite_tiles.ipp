@@ -9,6 +9,9 @@
 // translation units are compiled with -ffp-contract=off, so the backward replays exactly the forward's
 // per-pixel decisions.
 #include <algorithm>
+#include <bit>
+#include <cstdint>
+#include <cstring>
 
 #include "d2gs/render/cpu/composite_tiles.hpp"
 #include "d2gs/render/cpu/simd_math.hpp"
@@ -40,42 +43,60 @@ D2GS_TILE_INLINE V smoothstep_grad_row(V e) {
   return (e <= 0) | (e >= 1) ? V{} : 6 * e * (1 - e);
 }
 
-// What one Gaussian contributes to a tile, precomputed once per (Gaussian, tile): the pixel rows its
-// alpha box reaches, and per row vector dx = mean_x - x and -1/2 qa dx^2.
+// What one Gaussian contributes to a tile, precomputed once per (Gaussian, tile): per column vector dx =
+// mean_x - x and -1/2 qa dx^2; per pixel row dy = mean_y - y, -1/2 qc dy^2 and -qb dy; and which row
+// vectors hold pixels the Gaussian can reach (the chord of raster_math.hpp's alpha_row_span through the
+// row, widened for rounding, so skipping the others never changes a result). The rows are the lanes of
+// that computation (a tile's S rows are C vectors), so the test costs a few vector instructions per
+// (Gaussian, tile) instead of a scalar square root per row.
 template <typename T>
 struct SplatInTile {
   using V = typename Row<T>::V;
-  static constexpr int C = S / Row<T>::kLanes;  // vectors per tile row
-  int y_lo, y_hi;
+  using M = typename Row<T>::M;
+  static constexpr int VL = Row<T>::kLanes;
+  static constexpr int C = S / VL;  // vectors per tile row, and groups of VL rows per tile
+  std::uint32_t rows;     // bit y: row y of the tile holds pixels the Gaussian can reach
+  std::uint32_t vecs[C];  // bit y of vecs[c]: row vector c of row y does
   V dx[C], hx[C];
-  D2GS_TILE_INLINE void init(const Splat<T>& s, int px0, int py0, int nrows, const V xs[C]) {
-    y_lo = std::max(s.y0 - py0, 0);
-    y_hi = std::min(s.y1 - py0, nrows - 1);
-    (void)px0;
+  alignas(sizeof(V)) T dy[S];
+  alignas(sizeof(V)) T hy[S];
+  alignas(sizeof(V)) T by[S];
+  // xs: the tile's pixel x per column vector; ys: its pixel y per group of rows; rs: the row index
+  // within the tile (0 … S-1) per group of rows.
+  D2GS_TILE_INLINE void init(const Splat<T>& s, int px0, int py0, int nrows, const V xs[C], const V ys[C],
+                             const V rs[C]) {
     for (int c = 0; c < C; ++c) {
       dx[c] = s.mx - xs[c];
       hx[c] = (T(-0.5) * s.qa) * dx[c] * dx[c];
+      vecs[c] = 0;
     }
+    rows = 0;
+    const int y_lo = std::max(s.y0 - py0, 0), y_hi = std::min(s.y1 - py0, nrows - 1);
+    if (y_lo > y_hi) return;
+    const T reach = s.reach * T(1.001) + T(1e-4);
+    const T qa_reach = s.qa * reach, det = s.qa * s.qc - s.qb * s.qb;
+    for (int g = y_lo / VL; g <= y_hi / VL; ++g) {
+      const V d = s.my - ys[g];
+      const V disc = qa_reach - d * d * det;  // qa^2 (half chord)^2
+      const M ok = (disc >= T(0)) & (rs[g] >= T(y_lo)) & (rs[g] <= T(y_hi));
+      const V half = sqrt_row(ok ? disc : V{}) * s.inv_qa;
+      const V centre = s.mx + s.qb * d * s.inv_qa;  // x of the chord's midpoint
+      const V x_lo = centre - half - T(1), x_hi = centre + half + T(1);
+      for (int c = 0; c < C; ++c)
+        vecs[c] |= lane_bits(ok & (x_lo <= T(px0 + c * VL + VL - 1)) & (x_hi >= T(px0 + c * VL))) << (g * VL);
+      const V h = (T(-0.5) * s.qc) * d * d, b = -s.qb * d;
+      std::memcpy(&dy[g * VL], &d, sizeof(V));
+      std::memcpy(&hy[g * VL], &h, sizeof(V));
+      std::memcpy(&by[g * VL], &b, sizeof(V));
+    }
+    for (int c = 0; c < C; ++c) rows |= vecs[c];
+  }
+  // Whether row vector c of row y is visited (every row in `rows` visits at least one).
+  D2GS_TILE_INLINE bool visits(int y, int c) const {
+    if constexpr (C == 1) return true;
+    return (vecs[c] >> y) & 1u;
   }
 };
-
-// The row vectors [c0, c1] of a tile row (pixel x from px0, offset dy = my - y) that hold pixels the
-// Gaussian can reach (raster_math.hpp, alpha_row_span); false when there are none.
-template <typename T>
-D2GS_TILE_INLINE bool row_vectors(const Splat<T>& s, T dy, int px0, int& c0, int& c1) {
-  constexpr int VL = Row<T>::kLanes;
-  T x_lo, x_hi;
-  if (!alpha_row_span(s.mx, dy, s.qa, s.qb, s.qc, s.reach, s.inv_qa, x_lo, x_hi)) return false;
-  // Clamp in floating point to just outside the tile before converting (means may be far off-screen).
-  x_lo = std::max(x_lo, T(px0 - 1));
-  x_hi = std::min(x_hi, T(px0 + S));
-  const int a = std::max(int(hd_ceil(x_lo)), px0) - px0;
-  const int b = std::min(int(hd_floor(x_hi)), px0 + S - 1) - px0;
-  if (a > b) return false;
-  c0 = a / VL;
-  c1 = b / VL;
-  return true;
-}
 
 // power = -1/2 d^T Q d for one row vector, as -1/2 qa dx^2 (per column) + (-1/2 qc dy^2 - qb dy dx) (per
 // row): the one formula both passes use.
@@ -106,13 +127,16 @@ void forward_tile(const Binning<T>& bin, int tile, const T bg[3], T* rgb, T* alp
   const int W = bin.width, H = bin.height;
   const int px0 = (tile % bin.tiles_x) * S, py0 = (tile / bin.tiles_x) * S;
   const int nrows = std::min(S, H - py0), ncols = std::min(S, W - px0);
-  V xs[C];
+  V xs[C], ys[C], rs[C];
   M outside_cols[C];
   for (int x = 0; x < S; ++x) {
     xs[x / VL][x % VL] = T(px0 + x);
+    ys[x / VL][x % VL] = T(py0 + x);
+    rs[x / VL][x % VL] = T(x);
     outside_cols[x / VL][x % VL] = x < ncols ? 0 : -1;
   }
   int alive = 0;
+  std::uint32_t alive_rows = 0;  // bit y: row y has pixels still compositing
   for (int y = 0; y < S; ++y) {
     for (int c = 0; c < C; ++c) {
       const int k = y * C + c;
@@ -123,6 +147,7 @@ void forward_tile(const Binning<T>& bin, int tile, const T bg[3], T* rgb, T* alp
     }
     row_alive[y] = y < nrows ? ncols : 0;
     alive += row_alive[y];
+    if (row_alive[y] > 0) alive_rows |= 1u << y;
   }
   const int begin = bin.tile_offsets[tile], end = bin.tile_offsets[tile + 1];
   SplatInTile<T> st;
@@ -130,18 +155,16 @@ void forward_tile(const Binning<T>& bin, int tile, const T bg[3], T* rgb, T* alp
   for (int j = begin; j < end && alive > 0; ++j) {
     if (j + kPrefetch < end) prefetch_splat(bin, j + kPrefetch);
     const Splat<T>& s = bin.splats[bin.isect_rank[j]];
-    st.init(s, px0, py0, nrows, xs);
+    st.init(s, px0, py0, nrows, xs, ys, rs);
     const M jl = M{} + (j - begin + 1);
-    const T qb = s.qb, qc = s.qc, o = s.opacity;
+    const T o = s.opacity;
     const T sr = s.r, sg = s.g, sb = s.b, sz = s.z;
-    for (int y = st.y_lo; y <= st.y_hi; ++y) {
-      if (row_alive[y] == 0) continue;
-      const T dy = s.my - T(py0 + y);
-      int c0, c1;
-      if (!row_vectors(s, dy, px0, c0, c1)) continue;
-      const T hy = (T(-0.5) * qc) * dy * dy, by = -qb * dy;
+    for (std::uint32_t todo = st.rows & alive_rows; todo != 0; todo &= todo - 1) {
+      const int y = std::countr_zero(todo);
+      const T hy = st.hy[y], by = st.by[y];
       int stopped_in_row = 0;
-      for (int c = c0; c <= c1; ++c) {
+      for (int c = 0; c < C; ++c) {
+        if (!st.visits(y, c)) continue;
         const int k = y * C + c;
         const V power = row_power(st.hx[c], st.dx[c], hy, by);
         const V og = o * exp_row(power);
@@ -176,6 +199,7 @@ void forward_tile(const Binning<T>& bin, int tile, const T bg[3], T* rgb, T* alp
       }
       row_alive[y] -= stopped_in_row;
       alive -= stopped_in_row;
+      if (row_alive[y] == 0) alive_rows &= ~(1u << y);
     }
   }
   for (int y = 0; y < nrows; ++y)
@@ -207,8 +231,12 @@ void backward_tile(const Binning<T>& bin, int tile, const T bg[3], const PixelSt
   const int W = bin.width, H = bin.height;
   const int px0 = (tile % bin.tiles_x) * S, py0 = (tile / bin.tiles_x) * S;
   const int nrows = std::min(S, H - py0), ncols = std::min(S, W - px0);
-  V xs[C];
-  for (int x = 0; x < S; ++x) xs[x / VL][x % VL] = T(px0 + x);
+  V xs[C], ys[C], rs[C];
+  for (int x = 0; x < S; ++x) {
+    xs[x / VL][x % VL] = T(px0 + x);
+    ys[x / VL][x % VL] = T(py0 + x);
+    rs[x / VL][x % VL] = T(x);
+  }
   int tile_max = 0;
   for (int y = 0; y < S; ++y) {
     for (int c = 0; c < C; ++c) {
@@ -243,18 +271,17 @@ void backward_tile(const Binning<T>& bin, int tile, const T bg[3], const PixelSt
   for (int jl = tile_max - 1; jl >= 0; --jl) {
     if (jl - kPrefetch >= 0) prefetch_splat(bin, begin + jl - kPrefetch);
     const Splat<T>& s = bin.splats[bin.isect_rank[begin + jl]];
-    st.init(s, px0, py0, nrows, xs);
+    st.init(s, px0, py0, nrows, xs, ys, rs);
     const T qa = s.qa, qb = s.qb, qc = s.qc, o = s.opacity;
     const T sr = s.r, sg = s.g, sb = s.b, sz = s.z;
     const M jlv = M{} + jl;
     V v_mx{}, v_my{}, v_qa{}, v_qb{}, v_qc{}, v_o{}, v_r{}, v_g{}, v_b{}, v_z{};
-    for (int y = st.y_lo; y <= st.y_hi; ++y) {
+    for (std::uint32_t todo = st.rows; todo != 0; todo &= todo - 1) {
+      const int y = std::countr_zero(todo);
       if (row_max[y] <= jl) continue;
-      const T dy = s.my - T(py0 + y);
-      int c0, c1;
-      if (!row_vectors(s, dy, px0, c0, c1)) continue;
-      const T hy = (T(-0.5) * qc) * dy * dy, by = -qb * dy;
-      for (int c = c0; c <= c1; ++c) {
+      const T dy = st.dy[y], hy = st.hy[y], by = st.by[y];
+      for (int c = 0; c < C; ++c) {
+        if (!st.visits(y, c)) continue;
         const int k = y * C + c;
         const V dx = st.dx[c];
         const V power = row_power(st.hx[c], dx, hy, by);

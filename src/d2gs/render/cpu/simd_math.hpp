@@ -8,7 +8,7 @@
 #include <cmath>
 #include <cstdint>
 
-#if defined(__AVX512F__) || defined(__FMA__)
+#if defined(__SSE2__)
 #include <immintrin.h>
 #endif
 
@@ -99,6 +99,53 @@ D2GS_TILE_INLINE Row<float>::V exp_row(Row<float>::V x) {
 D2GS_TILE_INLINE Row<double>::V exp_row(Row<double>::V x) {
   for (int k = 0; k < Row<double>::kLanes; ++k) x[k] = std::exp(x[k]);
   return x;
+}
+
+// Square root of every lane, correctly rounded (the value std::sqrt gives each lane).
+D2GS_TILE_INLINE Row<float>::V sqrt_row(Row<float>::V x) {
+#if defined(__AVX512F__)
+  return _mm512_maskz_sqrt_ps(__mmask16(0xFFFF), x);  // not _mm512_sqrt_ps: GCC 12 warns inside it
+#elif defined(__AVX__)
+  return _mm256_sqrt_ps(x);
+#elif defined(__SSE2__)
+  return _mm_sqrt_ps(x);
+#else
+  for (int k = 0; k < Row<float>::kLanes; ++k) x[k] = std::sqrt(x[k]);
+  return x;
+#endif
+}
+D2GS_TILE_INLINE Row<double>::V sqrt_row(Row<double>::V x) {
+#if defined(__AVX512F__)
+  return _mm512_maskz_sqrt_pd(__mmask8(0xFF), x);
+#elif defined(__AVX__)
+  return _mm256_sqrt_pd(x);
+#elif defined(__SSE2__)
+  return _mm_sqrt_pd(x);
+#else
+  for (int k = 0; k < Row<double>::kLanes; ++k) x[k] = std::sqrt(x[k]);
+  return x;
+#endif
+}
+
+// Bit k set when lane k of the mask is set (lanes are 0 or -1).
+template <typename M>
+D2GS_TILE_INLINE std::uint32_t lane_bits(M m) {
+  constexpr int L = int(sizeof(M) / sizeof(m[0]));
+#if defined(__AVX512F__)
+  if constexpr (sizeof(M) == 64 && L == 16) return _mm512_test_epi32_mask((__m512i)m, (__m512i)m);
+  if constexpr (sizeof(M) == 64 && L == 8) return _mm512_test_epi64_mask((__m512i)m, (__m512i)m);
+#endif
+#if defined(__AVX__)
+  if constexpr (sizeof(M) == 32 && L == 8) return static_cast<std::uint32_t>(_mm256_movemask_ps((__m256)m));
+  if constexpr (sizeof(M) == 32 && L == 4) return static_cast<std::uint32_t>(_mm256_movemask_pd((__m256d)m));
+#endif
+#if defined(__SSE2__)
+  if constexpr (sizeof(M) == 16 && L == 4) return static_cast<std::uint32_t>(_mm_movemask_ps((__m128)m));
+  if constexpr (sizeof(M) == 16 && L == 2) return static_cast<std::uint32_t>(_mm_movemask_pd((__m128d)m));
+#endif
+  std::uint32_t bits = 0;
+  for (int k = 0; k < L; ++k) bits |= std::uint32_t(m[k] & 1) << k;
+  return bits;
 }
 
 // True when any lane of the mask is set.
