@@ -275,11 +275,14 @@ void backward_tile(const Binning<T>& bin, int tile, const T bg[3], const PixelSt
     const T qa = s.qa, qb = s.qb, qc = s.qc, o = s.opacity;
     const T sr = s.r, sg = s.g, sb = s.b, sz = s.z;
     const M jlv = M{} + jl;
-    V v_mx{}, v_my{}, v_qa{}, v_qb{}, v_qc{}, v_o{}, v_r{}, v_g{}, v_b{}, v_z{};
+    // d power / d (mx, my, qa, qb, qc) = -(qa dx + qb dy, qb dx + qc dy, dx^2 / 2, dx dy, dy^2 / 2): the
+    // five sums below of g = d loss / d power (times dx, dy, dx^2, dx dy, dy^2) give all five gradients.
+    V a_x{}, a_y{}, a_xx{}, a_xy{}, a_yy{}, v_o{}, v_r{}, v_g{}, v_b{}, v_z{};
     for (std::uint32_t todo = st.rows; todo != 0; todo &= todo - 1) {
       const int y = std::countr_zero(todo);
       if (row_max[y] <= jl) continue;
       const T dy = st.dy[y], hy = st.hy[y], by = st.by[y];
+      const V dyv = V{} + dy, dy2v = V{} + dy * dy;
       for (int c = 0; c < C; ++c) {
         if (!st.visits(y, c)) continue;
         const int k = y * C + c;
@@ -328,20 +331,21 @@ void backward_tile(const Binning<T>& bin, int tile, const T bg[3], const PixelSt
         if constexpr (Smooth) d_pow += ok ? g_alpha * d_power_extra_scale : V{};
         v_o = fmadd(d_og, G, v_o);
         const V d_pow_dx = d_pow * dx;
-        v_mx -= d_pow * (qa * dx + qb * dy);
-        v_my -= d_pow * (qb * dx + qc * dy);
-        v_qa = fmadd(V{} + T(-0.5) * dx, d_pow_dx, v_qa);
-        v_qb = fmadd(V{} - dy, d_pow_dx, v_qb);
-        v_qc = fmadd(V{} + T(-0.5) * (dy * dy), d_pow, v_qc);
+        a_x += d_pow_dx;
+        a_xx = fmadd(d_pow_dx, dx, a_xx);
+        a_xy = fmadd(d_pow_dx, dyv, a_xy);
+        a_y = fmadd(d_pow, dyv, a_y);
+        a_yy = fmadd(d_pow, dy2v, a_yy);
       }
     }
     // Lane sums in a fixed order.
     T* out = isect_grads + static_cast<std::size_t>(begin + jl) * kIsectGradStride;
-    out[0] = sum_lanes(v_mx);
-    out[1] = sum_lanes(v_my);
-    out[2] = sum_lanes(v_qa);
-    out[3] = sum_lanes(v_qb);
-    out[4] = sum_lanes(v_qc);
+    const T sx = sum_lanes(a_x), sy = sum_lanes(a_y);
+    out[0] = -(qa * sx + qb * sy);
+    out[1] = -(qb * sx + qc * sy);
+    out[2] = T(-0.5) * sum_lanes(a_xx);
+    out[3] = -sum_lanes(a_xy);
+    out[4] = T(-0.5) * sum_lanes(a_yy);
     out[5] = sum_lanes(v_o);
     out[6] = sum_lanes(v_r);
     out[7] = sum_lanes(v_g);
