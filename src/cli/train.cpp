@@ -83,6 +83,8 @@ Run add_train_command(CLI::App& app) {
   opt("--dd-weight-density", d.dd_drop.weight_density, "dd_weight_density", "D²GS: weight of the density score");
   opt("--dd-rate-min", d.dd_drop.rate_min, "dd_rate_min", "D²GS: initial drop rate");
   opt("--dd-rate-max", d.dd_drop.rate_max, "dd_rate_max", "D²GS: final drop rate");
+  flag("--dd-compensate", d.dd_drop.compensate, "dd_compensate",
+       "D²GS diagnostic: scale kept Gaussians' opacity by 1/(1 − p_i) as DropGaussian does (paper and release: no)");
   opt("--dafe-prior", d.dafe_prior_dir, "dafe_prior_dir",
       "D²GS: folder of per-view prior maps NAME.npy, or 'stereo' (the depth maps of `d2gs init`, kind depth); "
       "default: the model's own depth at iteration 1000");

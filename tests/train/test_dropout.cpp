@@ -94,6 +94,37 @@ TEST(DdDrop, EmpiricalDropCountMatchesSumOfProbabilities) {
   EXPECT_NEAR(total / draws, expected, 5 * std::sqrt(variance / draws));
 }
 
+TEST(DdDrop, CompensatedMaskKeepsTheExpectedOpacity) {
+  // Kept Gaussians get exactly 1/(1 − p_i); p = 1 always drops; E[multiplier] = 1 for every Gaussian.
+  const std::vector<float> p = {0.0f, 0.25f, 0.5f, 0.9f, 1.0f};
+  Rng rng(3);
+  std::vector<float> m;
+  std::vector<double> sum(p.size(), 0.0);
+  const int draws = 40000;
+  for (int d = 0; d < draws; ++d) {
+    bernoulli_mask(p, rng, m, /*compensate=*/true);
+    for (std::size_t i = 0; i < p.size(); ++i) {
+      if (m[i] != 0.0f) {
+        EXPECT_FLOAT_EQ(m[i], 1.0f / (1.0f - p[i])) << i;
+      }
+      sum[i] += m[i];
+    }
+  }
+  EXPECT_EQ(sum[4], 0.0);
+  EXPECT_EQ(sum[0], draws);
+  for (std::size_t i = 1; i < 4; ++i) {
+    // sd of the mean: sqrt(p / (1 − p) / draws).
+    const double sd = std::sqrt(p[i] / (1.0 - p[i]) / draws);
+    EXPECT_NEAR(sum[i] / draws, 1.0, 5 * sd) << i;
+  }
+  // Without compensation the same draws give 0/1 with the same zeros.
+  Rng a(9), b(9);
+  std::vector<float> plain, comp;
+  bernoulli_mask(p, a, plain);
+  bernoulli_mask(p, b, comp, true);
+  for (std::size_t i = 0; i < p.size(); ++i) EXPECT_EQ(plain[i] == 0.0f, comp[i] == 0.0f);
+}
+
 TEST(DdDrop, DepthFormulas) {
   Gaussians g;
   g.resize(1, 0);

@@ -105,6 +105,7 @@ void to_json(nlohmann::json& j, const TrainConfig& c) {
       {"dd_rate_min", c.dd_drop.rate_min}, {"dd_rate_max", c.dd_drop.rate_max},
       {"dd_rate_iterations", c.dd_drop.rate_iterations}, {"dd_use_depth_score", c.dd_drop.use_depth_score},
       {"dd_use_density_score", c.dd_drop.use_density_score}, {"dd_use_layers", c.dd_drop.use_layers},
+      {"dd_compensate", c.dd_drop.compensate},
       {"dd_lambda_near", c.dd_drop.lambda_near}, {"dd_lambda_middle", c.dd_drop.lambda_middle},
       {"dd_lambda_far", c.dd_drop.lambda_far}, {"dd_depth_mode", to_string(c.dd_drop.depth_mode)},
       {"density_refresh_every", c.density_refresh_every}, {"release_density_cache", c.release_density_cache},
@@ -170,6 +171,7 @@ void update_from_json(TrainConfig& c, const nlohmann::json& j) {
     c.dd_drop.use_depth_score = k["dd_use_depth_score"];
     c.dd_drop.use_density_score = k["dd_use_density_score"];
     c.dd_drop.use_layers = k["dd_use_layers"];
+    c.dd_drop.compensate = k["dd_compensate"];
     c.dd_drop.lambda_near = k["dd_lambda_near"];
     c.dd_drop.lambda_middle = k["dd_lambda_middle"];
     c.dd_drop.lambda_far = k["dd_lambda_far"];

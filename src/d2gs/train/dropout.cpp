@@ -91,10 +91,14 @@ std::vector<float> dd_drop_probabilities(const std::vector<float>& depths, const
   return p;
 }
 
-void bernoulli_mask(const std::vector<float>& probabilities, Rng& rng, std::vector<float>& multiplier) {
+void bernoulli_mask(const std::vector<float>& probabilities, Rng& rng, std::vector<float>& multiplier,
+                    bool compensate) {
   multiplier.resize(probabilities.size());
-  for (std::size_t i = 0; i < probabilities.size(); ++i)
-    multiplier[i] = rng.uniform() < probabilities[i] ? 0.0f : 1.0f;
+  for (std::size_t i = 0; i < probabilities.size(); ++i) {
+    const float p = probabilities[i];
+    // u ∈ [0, 1): p = 1 always drops, so 1 − p > 0 wherever a Gaussian is kept.
+    multiplier[i] = rng.uniform() < p ? 0.0f : compensate ? 1.0f / (1.0f - p) : 1.0f;
+  }
 }
 
 }  // namespace d2gs

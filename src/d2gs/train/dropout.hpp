@@ -7,7 +7,8 @@
 // DD-Drop (D²GS, method.md §4): p_i = λ_layer(i) · S_i · r(t), with
 //   S_i = w_d·(1 − minmax(d_i)) + w_ρ·minmax(ρ_i),  ρ_i = −mean distance to the 6 nearest Gaussians,
 //   λ = 1 / 0.7 / 0.3 for the near / middle / far depth tertile, r(t) = r_min + (r_max − r_min)·min(t,T)/T;
-// dropped Gaussians get multiplier 0, kept ones 1 (no rescaling). Depth d_i is the Euclidean distance to
+// dropped Gaussians get multiplier 0, kept ones 1 (no rescaling; `compensate` gives kept ones 1/(1 − p_i),
+// DropGaussian's rule per Gaussian, as a diagnostic the paper and the release do not have). Depth d_i is the Euclidean distance to
 // the camera centre (paper) or x_i · R_w2c[:,2] (release: no translation).
 #include <cstdint>
 #include <vector>
@@ -35,6 +36,7 @@ struct DdDropOptions {
   bool use_layers = true;
   double lambda_near = 1.0, lambda_middle = 0.7, lambda_far = 0.3;
   DepthMode depth_mode = DepthMode::Euclidean;
+  bool compensate = false;  // kept Gaussians' opacity × 1/(1 − p_i), so that its expectation is unchanged
 };
 
 // r(t) of DD-Drop.
@@ -53,7 +55,8 @@ std::vector<float> density_scores(const Gaussians& model);
 // both aligned with the model.
 std::vector<float> dd_drop_probabilities(const std::vector<float>& depths, const std::vector<float>& density_score,
                                          const DdDropOptions& options, int iteration);
-// Bernoulli draws: multiplier 0 where dropped, 1 elsewhere.
-void bernoulli_mask(const std::vector<float>& probabilities, Rng& rng, std::vector<float>& multiplier);
+// Bernoulli draws: multiplier 0 where dropped; elsewhere 1, or 1/(1 − p_i) with `compensate`.
+void bernoulli_mask(const std::vector<float>& probabilities, Rng& rng, std::vector<float>& multiplier,
+                    bool compensate = false);
 
 }  // namespace d2gs

@@ -395,7 +395,7 @@ IterationRecord Trainer::step() {
     const std::vector<float>& density = s.density_cache.size() == n ? s.density_cache : out_of_step;
     const Camera& cam = s.scene.cameras[static_cast<std::size_t>(s.split.train[static_cast<std::size_t>(view)])];
     s.dd_probabilities = dd_drop_probabilities(gaussian_depths(s.model, cam, cfg.dd_drop.depth_mode), density, cfg.dd_drop, t);
-    bernoulli_mask(s.dd_probabilities, s.rng_dropout, s.multiplier);
+    bernoulli_mask(s.dd_probabilities, s.rng_dropout, s.multiplier, cfg.dd_drop.compensate);
     multiplier = s.multiplier.data();
   }
   if (multiplier) {
