@@ -8,8 +8,8 @@
 //   S_i = w_d·(1 − minmax(d_i)) + w_ρ·minmax(ρ_i),  ρ_i = −mean distance to the 6 nearest Gaussians,
 //   λ = 1 / 0.7 / 0.3 for the near / middle / far depth tertile, r(t) = r_min + (r_max − r_min)·min(t,T)/T;
 // dropped Gaussians get multiplier 0, kept ones 1 (no rescaling; `compensate` gives kept ones 1/(1 − p_i),
-// DropGaussian's rule per Gaussian, as a diagnostic the paper and the release do not have). Depth d_i is the Euclidean distance to
-// the camera centre (paper) or x_i · R_w2c[:,2] (release: no translation).
+// DropGaussian's rule per Gaussian, a diagnostic that neither the paper nor the release has). Depth d_i is
+// the Euclidean distance to the camera centre (paper) or x_i · R_w2c[:,2] (release: no translation).
 #include <cstdint>
 #include <vector>
 
