@@ -136,7 +136,7 @@ void BM_RenderStages(benchmark::State& state) {
     lap();
     composite_forward(bin, bg, false, rgb.data(), alpha.data(), depth.data(), pixels);
     lap();
-    composite_backward(bin, bg, false, pixels, d_rgb.data(), no_grad, no_grad, n, isect_grads, pgrads);
+    composite_backward(bin, bg, false, false, pixels, d_rgb.data(), no_grad, no_grad, n, isect_grads, pgrads);
     lap();
     project_backward(view, no_multiplier, camera, proj, pgrads, gview);
     lap();

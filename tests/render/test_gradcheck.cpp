@@ -273,7 +273,7 @@ TEST(RenderGradcheck, CompositingStage) {
   loss();
   std::vector<double> isect;
   ProjectedGrads<double> g;
-  composite_backward(bin, bg, true, state, w_rgb.data(), w_alpha.data(), w_depth.data(), n, isect, g);
+  composite_backward(bin, bg, true, false, state, w_rgb.data(), w_alpha.data(), w_depth.data(), n, isect, g);
   const auto sized = [](std::vector<double>& v, std::size_t k) { v.resize(k); return v; };
   p.mean2d.resize(n * 2); p.conic.resize(n * 3); p.color.resize(n * 3);
   check_gradient("comp.mean2d", p.mean2d, sized(g.mean2d, n * 2), loss, kStep, 1e-4, 1e-7);

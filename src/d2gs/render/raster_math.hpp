@@ -8,6 +8,11 @@
 // if T * (1 - alpha) < 1e-4 the pixel is done and i is NOT composited; otherwise
 // C += alpha T colour,  D += alpha T z,  T *= 1 - alpha.  Output C + T background, alpha 1 - T.
 //
+// Gradient through the clamp alpha = min(0.99, o G), two rules (alpha_clamp_gradient_passes):
+//   exact (default): d alpha / d(oG) = 1 below 0.99 and 0 where the clamp is active;
+//   pass-through: d alpha / d(oG) = 1 everywhere, as the original rasterizer's backward.cu computes it
+//   (dL/dG = o dL/dalpha, dL/do += G dL/dalpha whatever the clamp), not the derivative of its forward.
+//
 // Smooth cutoff (gradient checks only): alpha = min(0.99, o G) * S(min(0.99, o G)) * P(power) with
 // S a C1 smoothstep from 0.5/255 to 1.5/255 and P a smoothstep of power from -4.5 to -4 (so alpha is 0
 // where the 3-sigma tile rectangle may stop), no early stop. Everything is then continuous and almost
@@ -36,6 +41,12 @@ D2GS_HD void tile_rect(T mx, T my, int radius, int tiles_x, int tiles_y, int rec
   rect[1] = int(hd_min(ty, hd_max(T(0), (my - r) / ts)));
   rect[2] = int(hd_min(tx, hd_max(T(0), (mx + r + T(kTileSize - 1)) / ts)));
   rect[3] = int(hd_min(ty, hd_max(T(0), (my + r + T(kTileSize - 1)) / ts)));
+}
+
+// Whether d alpha / d(o G) is 1 (else 0) at og = o G under the chosen rule (see the header comment).
+template <typename T>
+D2GS_HD bool alpha_clamp_gradient_passes(T og, bool pass_through) {
+  return pass_through || og < T(kAlphaMax);
 }
 
 template <typename T>

@@ -49,6 +49,10 @@ struct RenderOptions {
   // Gradient checks only: replaces the hard alpha >= 1/255 test and the early stop by a smooth cutoff
   // (raster_math.hpp) so that finite differences are meaningful. Off for rendering and training.
   bool smooth_cutoff = false;
+  // The gradient through alpha = min(0.99, o G) (raster_math.hpp, alpha_clamp_gradient_passes): false =
+  // the derivative of the clamp, zero where it is active; true = as if unclamped, the rule of the
+  // original 3DGS rasterizer (backward.cu) that DropGaussian and D²GS inherit. Backward only.
+  bool alpha_clamp_pass_through = false;
 };
 
 struct RenderOutputs {

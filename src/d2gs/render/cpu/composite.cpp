@@ -105,7 +105,7 @@ void composite_forward(const Binning<T>& bin, const T background[3], bool smooth
 }
 
 template <typename T>
-void composite_backward(const Binning<T>& bin, const T background[3], bool smooth_cutoff,
+void composite_backward(const Binning<T>& bin, const T background[3], bool smooth_cutoff, bool clamp_pass_through,
                         const PixelState<T>& state, const T* d_rgb, const T* d_alpha, const T* d_depth,
                         std::size_t n, std::vector<T>& isect_grads, ProjectedGrads<T>& out) {
   grow(isect_grads, bin.intersections * kIsectGradStride);
@@ -117,7 +117,7 @@ void composite_backward(const Binning<T>& bin, const T background[3], bool smoot
   {
 #pragma omp for schedule(dynamic, 1) nowait
     for (int tile = 0; tile < n_tiles; ++tile)
-      backward_tile(bin, tile, background, smooth_cutoff, state, d_rgb, d_alpha, d_depth, ig);
+      backward_tile(bin, tile, background, smooth_cutoff, clamp_pass_through, state, d_rgb, d_alpha, d_depth, ig);
     // Gaussians that were not binned get zero gradients.
 #pragma omp for schedule(static)
     for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(n); ++i) {
@@ -153,10 +153,10 @@ template void composite_forward<float>(const Binning<float>&, const float[3], bo
                                        PixelState<float>&);
 template void composite_forward<double>(const Binning<double>&, const double[3], bool, double*, double*,
                                         double*, PixelState<double>&);
-template void composite_backward<float>(const Binning<float>&, const float[3], bool, const PixelState<float>&,
+template void composite_backward<float>(const Binning<float>&, const float[3], bool, bool, const PixelState<float>&,
                                         const float*, const float*, const float*, std::size_t,
                                         std::vector<float>&, ProjectedGrads<float>&);
-template void composite_backward<double>(const Binning<double>&, const double[3], bool,
+template void composite_backward<double>(const Binning<double>&, const double[3], bool, bool,
                                          const PixelState<double>&, const double*, const double*,
                                          const double*, std::size_t, std::vector<double>&,
                                          ProjectedGrads<double>&);

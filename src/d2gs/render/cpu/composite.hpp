@@ -19,9 +19,10 @@ void composite_forward(const Binning<T>& bin, const T background[3], bool smooth
                        T* depth, PixelState<T>& state);
 
 // Gradients w.r.t. the Projected quantities of the n Gaussians (zero for those not binned) from the
-// gradients w.r.t. rgb, alpha and depth (each may be null = zero).
+// gradients w.r.t. rgb, alpha and depth (each may be null = zero). clamp_pass_through: the gradient
+// through alpha = min(0.99, o G) as if unclamped (the original rasterizer's rule; raster_math.hpp).
 template <typename T>
-void composite_backward(const Binning<T>& bin, const T background[3], bool smooth_cutoff,
+void composite_backward(const Binning<T>& bin, const T background[3], bool smooth_cutoff, bool clamp_pass_through,
                         const PixelState<T>& state, const T* d_rgb, const T* d_alpha, const T* d_depth,
                         std::size_t n, std::vector<T>& isect_grads, ProjectedGrads<T>& out);
 

@@ -24,7 +24,7 @@ struct TileKernels {
   // One tile of the backward pass: writes kIsectGradStride partial gradients for each of the tile's
   // intersections (zero past the tile's last contributor).
   void (*backward)(const Binning<T>& bin, int tile, const T background[3], bool smooth_cutoff,
-                   const PixelState<T>& state, const T* d_rgb, const T* d_alpha, const T* d_depth,
+                   bool clamp_pass_through, const PixelState<T>& state, const T* d_rgb, const T* d_alpha, const T* d_depth,
                    T* isect_grads) = nullptr;
 };
 

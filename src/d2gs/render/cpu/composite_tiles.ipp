@@ -220,8 +220,8 @@ void forward_tile(const Binning<T>& bin, int tile, const T bg[3], T* rgb, T* alp
 }
 
 template <typename T, bool Smooth>
-void backward_tile(const Binning<T>& bin, int tile, const T bg[3], const PixelState<T>& state, const T* d_rgb,
-                   const T* d_alpha, const T* d_depth, T* isect_grads) {
+void backward_tile(const Binning<T>& bin, int tile, const T bg[3], bool clamp_pass_through, const PixelState<T>& state,
+                   const T* d_rgb, const T* d_alpha, const T* d_depth, T* isect_grads) {
   using V = typename Row<T>::V;
   using M = typename Row<T>::M;
   constexpr int VL = Row<T>::kLanes, C = S / VL;
@@ -325,8 +325,10 @@ void backward_tile(const Binning<T>& bin, int tile, const T bg[3], const PixelSt
         v_g = fmadd(wk, gg[k], v_g);
         v_b = fmadd(wk, gb[k], v_b);
         v_z = fmadd(wk, gd[k], v_z);
-        // alpha_raw = min(0.99, o G): no gradient through the clamp.
-        const V d_og = ok & (og < T(kAlphaMax)) ? g_alpha * d_alpha_raw_scale : V{};
+        // alpha_raw = min(0.99, o G): the lane-wise alpha_clamp_gradient_passes of raster_math.hpp (no gradient
+        // through an active clamp, unless the original's pass-through rule is chosen).
+        const M passes = clamp_pass_through ? ok : ok & (og < T(kAlphaMax));
+        const V d_og = passes ? g_alpha * d_alpha_raw_scale : V{};
         V d_pow = d_og * og;
         if constexpr (Smooth) d_pow += ok ? g_alpha * d_power_extra_scale : V{};
         v_o = fmadd(d_og, G, v_o);
@@ -371,12 +373,12 @@ void forward_entry(const Binning<T>& bin, int tile, const T background[3], bool 
 
 template <typename T>
 void backward_entry(const Binning<T>& bin, int tile, const T background[3], bool smooth_cutoff,
-                    const PixelState<T>& state, const T* d_rgb, const T* d_alpha, const T* d_depth,
-                    T* isect_grads) {
+                    bool clamp_pass_through, const PixelState<T>& state, const T* d_rgb, const T* d_alpha,
+                    const T* d_depth, T* isect_grads) {
   if (smooth_cutoff)
-    backward_tile<T, true>(bin, tile, background, state, d_rgb, d_alpha, d_depth, isect_grads);
+    backward_tile<T, true>(bin, tile, background, clamp_pass_through, state, d_rgb, d_alpha, d_depth, isect_grads);
   else
-    backward_tile<T, false>(bin, tile, background, state, d_rgb, d_alpha, d_depth, isect_grads);
+    backward_tile<T, false>(bin, tile, background, clamp_pass_through, state, d_rgb, d_alpha, d_depth, isect_grads);
 }
 
 #define D2GS_TILE_STR2(x) #x

@@ -49,7 +49,7 @@ template <typename T>
 void CpuRasterizerCore<T>::backward(const T* d_rgb, const T* d_alpha, const T* d_depth,
                                     const ModelGradView<T>& grads, T* grad_mean2d_ndc) {
   const std::size_t n = model_.count;
-  composite_backward(binning_, background_, options_.smooth_cutoff, pixels_, d_rgb, d_alpha, d_depth, n,
+  composite_backward(binning_, background_, options_.smooth_cutoff, options_.alpha_clamp_pass_through, pixels_, d_rgb, d_alpha, d_depth, n,
                      isect_grads_, projected_grads_);
   if (grad_mean2d_ndc) {
     const T sx = T(0.5) * T(camera_.width), sy = T(0.5) * T(camera_.height);
