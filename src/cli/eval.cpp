@@ -62,7 +62,12 @@ Run add_eval_command(CLI::App& app) {
   cmd->add_option("--lpips-input-range", *lpips_range,
                   "Images fed to LPIPS: unit = [0,1] as the sparse-view papers, symmetric = [-1,1] as LPIPS")
       ->capture_default_str();
-  return [model_dir, iteration, json_only, lpips_weights, lpips_range]() -> int {
+  auto image_source = std::make_shared<std::string>();
+  cmd->add_option("--image-source", *image_source,
+                  "Ground-truth images: as the run was trained (default, from its config.json), or 'folder' / "
+                  "'largest' to score the same renders against another source (see d2gs train --image-source)")
+      ->check(CLI::IsMember({"folder", "largest"}));
+  return [model_dir, iteration, json_only, lpips_weights, lpips_range, image_source]() -> int {
     // Options first, so that a bad weights file fails before any rendering.
     const LpipsInputRange range = parse_lpips_input_range(*lpips_range, "--lpips-input-range");
     std::optional<Lpips> lpips;
@@ -78,13 +83,11 @@ Run add_eval_command(CLI::App& app) {
     if (!cj.contains("split") || !cj["split"].contains("test")) fail_file(cfg_path, "has no recorded split");
     const std::vector<int> test = cj["split"]["test"].get<std::vector<int>>();
     const bool oracle = cj.value("init_is_oracle", false);
-    for (const char* recorded : {"init_is_oracle", "scene_extent", "split"}) cj.erase(recorded);
+    for (const char* recorded : {"init_is_oracle", "scene_extent", "split", "images_folder"}) cj.erase(recorded);
     TrainConfig c;
     update_from_json(c, cj);
-    SceneLoadOptions lo;
-    lo.resolution = c.resolution;
-    lo.background = c.white_background ? glm::vec3(1.0f) : glm::vec3(0.0f);
-    const Scene scene = load_scene(c.source, lo);
+    if (!image_source->empty()) c.image_source = image_source_from_string(*image_source);
+    const Scene scene = load_scene(c.source, scene_load_options(c));
     for (int v : test)
       if (v < 0 || static_cast<std::size_t>(v) >= scene.cameras.size()) fail_file(cfg_path, "test view {} is not in the scene", v);
     const int it = pick_iteration(run, *iteration);
@@ -101,6 +104,8 @@ Run add_eval_command(CLI::App& app) {
     j["iteration"] = it;
     j["gaussians"] = model.size();
     j["init_is_oracle"] = oracle;
+    j["image_source"] = to_string(scene.image_source);
+    j["images_folder"] = scene.images_folder;
     write_file_atomic(run / "results.json", j.dump(2));
     if (*json_only) std::printf("%s\n", j.dump(2).c_str());
     else std::printf("%s(%s, iteration %d, %zu Gaussians%s)\nwritten %s\n", format_table(summary).c_str(),

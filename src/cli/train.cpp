@@ -43,6 +43,13 @@ Run add_train_command(CLI::App& app) {
   opt("--train-views", d.train_views, "train_views", "Explicit training views (global indices)")->delimiter(',');
   opt("--test-views", d.test_views, "test_views", "Explicit test views (global indices)")->delimiter(',');
   flag("--white-background", d.white_background, "white_background", "White background (Blender scenes)");
+  auto image_source = std::make_shared<std::string>("folder");
+  keys->emplace_back(cmd->add_option("--image-source", *image_source,
+                                     "Images at -r R: 'folder' (images_R/, else a larger folder area-resampled) or "
+                                     "'largest' (the largest image folder, resized with PIL's bicubic as the original "
+                                     "code does; training and ground truth)")
+                         ->check(CLI::IsMember({"folder", "largest"})),
+                     "image_source");
   keys->emplace_back(cmd->add_option("--method", *method, "3dgs, dropgaussian or d2gs")
                          ->check(CLI::IsMember({"3dgs", "dropgaussian", "d2gs"})),
                      "method");
@@ -61,6 +68,12 @@ Run add_train_command(CLI::App& app) {
   opt("--scaling-lr", d.lr.scales, "scaling_lr", "Scale learning rate");
   opt("--rotation-lr", d.lr.quats, "rotation_lr", "Rotation learning rate");
   opt("--lambda-dssim", d.lambda_dssim, "lambda_dssim", "Weight of 1 − SSIM in the loss");
+  auto clamp_grad = std::make_shared<std::string>("exact");
+  keys->emplace_back(cmd->add_option("--alpha-clamp-grad", *clamp_grad,
+                                     "Gradient through alpha = min(0.99, o·G): 'exact' (0 where clamped) or "
+                                     "'pass-through' (as if unclamped: the original rasterizer's rule)")
+                         ->check(CLI::IsMember({"exact", "pass-through"})),
+                     "alpha_clamp_grad");
   opt("--sh-degree", d.sh_degree, "sh_degree", "Maximum SH degree");
   opt("--densify-from", d.densify_from, "densify_from", "Densify after this iteration");
   opt("--densify-until", d.densify_until, "densify_until", "Densify before this iteration");
@@ -105,10 +118,12 @@ Run add_train_command(CLI::App& app) {
   flag("--quiet", d.quiet, "quiet", "No progress line");
   cmd->add_option("--resume", *resume, "Continue from a checkpoint (chkpntN.bin) bit-identically");
 
-  return [cfg, config_file, resume, method, keys, preset, scene_preset, prior_kind]() -> int {
+  return [cfg, config_file, resume, method, keys, preset, scene_preset, prior_kind, image_source, clamp_grad]() -> int {
     nlohmann::json flags;
     to_json(flags, *cfg);
     flags["method"] = *method;
+    flags["image_source"] = *image_source;
+    flags["alpha_clamp_grad"] = *clamp_grad;
     flags["dafe_prior_kind"] = prior_kind->empty() ? "disparity" : *prior_kind;
     TrainConfig c;
     if (!config_file->empty()) {
@@ -118,7 +133,7 @@ Run add_train_command(CLI::App& app) {
       } catch (const nlohmann::json::parse_error& e) {
         fail_file(*config_file, "invalid JSON ({})", e.what());
       }
-      for (const char* recorded : {"init_is_oracle", "scene_extent", "split"}) j.erase(recorded);  // saved for the record
+      for (const char* recorded : {"init_is_oracle", "scene_extent", "split", "images_folder"}) j.erase(recorded);  // saved for the record
       update_from_json(c, j);
     }
     // Presets apply over the file; explicit flags apply over both.

@@ -98,6 +98,7 @@ Scene load_blender_scene(const fs::path& root, const SceneLoadOptions& options) 
   scene.format = SceneFormat::Blender;
   scene.resolution = options.resolution;
   scene.background = options.background;
+  scene.image_source = options.image_source;  // Blender has one image folder: only the filter changes
 
   std::vector<std::string> folders;
   for (const char* split : {"train", "test"}) {

@@ -547,6 +547,7 @@ Scene load_colmap_scene(const fs::path& root, const SceneLoadOptions& options) {
   scene.format = SceneFormat::Colmap;
   scene.resolution = options.resolution;
   scene.background = options.background;
+  scene.image_source = options.image_source;
 
   std::unordered_map<std::uint32_t, const ColmapCamera*> by_id;
   bool warned_radial = false;
@@ -578,7 +579,7 @@ Scene load_colmap_scene(const fs::path& root, const SceneLoadOptions& options) {
   for (std::size_t i = 1; i < images.size(); ++i)
     if (images[i].name == images[i - 1].name) fail_file(images_path, "image name {} appears twice", images[i].name);
 
-  const auto folder = choose_image_folder(root, options.resolution);
+  const auto folder = choose_image_folder(root, options.resolution, options.image_source);
   scene.images_folder = folder.folder;
   scene.cameras.reserve(images.size());
   bool warned_aspect = false;

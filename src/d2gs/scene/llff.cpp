@@ -88,7 +88,8 @@ Scene load_llff_scene(const fs::path& root, const SceneLoadOptions& options) {
   scene.format = SceneFormat::Llff;
   scene.resolution = options.resolution;
   scene.background = options.background;
-  const auto folder = choose_image_folder(root, options.resolution);
+  scene.image_source = options.image_source;
+  const auto folder = choose_image_folder(root, options.resolution, options.image_source);
   scene.images_folder = folder.folder;
   const auto names = list_images(root / folder.folder);
   if (names.size() != poses.size())

@@ -4,8 +4,10 @@
 #include <cmath>
 #include <fstream>
 #include <string>
+#include <vector>
 
 #include "d2gs/core/error.hpp"
+#include "d2gs/core/resize_pil.hpp"
 #include "d2gs/scene/blender.hpp"
 #include "d2gs/scene/colmap.hpp"
 #include "d2gs/scene/llff.hpp"
@@ -54,10 +56,21 @@ void check_resolution(int resolution) {
     fail("resolution (-r) must be 1, 2, 4 or 8, got {}", resolution);
 }
 
-ImageFolderChoice choose_image_folder(const fs::path& root, int resolution) {
+const char* to_string(ImageSource source) { return source == ImageSource::Largest ? "largest" : "folder"; }
+
+ImageSource image_source_from_string(const std::string& s) {
+  if (s == "folder") return ImageSource::Folder;
+  if (s == "largest") return ImageSource::Largest;
+  fail("image source '{}' is not one of folder, largest", s);
+}
+
+ImageFolderChoice choose_image_folder(const fs::path& root, int resolution, ImageSource source) {
   check_resolution(resolution);
+  std::vector<int> factors;  // every F dividing R: R, R/2, ..., 1 (Folder) or 1, 2, ..., R (Largest)
+  for (int f = resolution; f >= 1; f /= 2) factors.push_back(f);
+  if (source == ImageSource::Largest) std::reverse(factors.begin(), factors.end());
   std::string looked;
-  for (int f = resolution; f >= 1; f /= 2) {  // R, R/2, ..., 1: every F dividing R, largest first
+  for (int f : factors) {
     const auto name = folder_name(f);
     if (is_dir(root / name)) return {name, f, resolution / f};
     looked += fmt::format("{}{}/", looked.empty() ? "" : ", ", name);
@@ -128,6 +141,7 @@ Image load_image(const Scene& scene, int index) {
     }
   }
   if (f == 1) return rgb;
+  if (scene.image_source == ImageSource::Largest) return resize_pil_bicubic(rgb, cam.width, cam.height);
   return resize_area(rgb, cam.width, cam.height);
 }
 

@@ -17,9 +17,19 @@ namespace d2gs {
 enum class SceneFormat { Colmap, Llff, Blender };
 const char* to_string(SceneFormat format);
 
+// Where the images at resolution R come from (`--image-source`):
+//   Folder:  images_R/ when present, else a larger images_F/ area-resampled by R/F (the prepared folders);
+//   Largest: the largest image folder present (images/, else the smallest F of images_F/), resized by R/F
+//            with PIL's bicubic filter (core/resize_pil.hpp), as the original 3DGS loader resizes the
+//            full-resolution images/ (training images and the ground truth it scores against).
+enum class ImageSource { Folder, Largest };
+const char* to_string(ImageSource source);
+ImageSource image_source_from_string(const std::string& s);  // "folder" | "largest"; throws otherwise
+
 struct SceneLoadOptions {
   int resolution = 1;                  // -r: 1, 2, 4 or 8 (1/R of full resolution)
   glm::vec3 background{0.0f};          // RGBA images are composited on this colour
+  ImageSource image_source = ImageSource::Folder;
 };
 
 struct Scene {
@@ -27,6 +37,7 @@ struct Scene {
   SceneFormat format = SceneFormat::Colmap;
   std::string images_folder;           // folder the images are read from, relative to root
   int resolution = 1;
+  ImageSource image_source = ImageSource::Folder;  // also picks the resampling filter of load_image
   glm::vec3 background{0.0f};
   std::vector<Camera> cameras;         // global image index = position in this list
   // Blender only: the dataset's own split (global indices); empty for COLMAP/LLFF.
@@ -41,7 +52,8 @@ struct Scene {
 // poses_bounds.npy -> LLFF, else transforms_train.json -> Blender (docs/formats.md, "Scenes"). Throws d2gs::Error naming the file and the problem.
 Scene load_scene(const std::filesystem::path& root, const SceneLoadOptions& options = {});
 // Decodes camera `index`'s image at the scene's resolution: RGB float [0,1], alpha composited on the
-// scene's background, area-resampled when needed; throws if its size differs from the camera's.
+// scene's background, resampled when needed (area, or PIL's bicubic for ImageSource::Largest); throws if
+// its size differs from the camera's.
 Image load_image(const Scene& scene, int index);
 
 // ---- resolution handling, shared by the format loaders ----
@@ -55,9 +67,11 @@ struct ImageFolderChoice {
   int folder_factor = 1;  // F: the folder holds 1/F of full resolution
   int resample = 1;       // R / F: further area downsampling applied on load
 };
-// images_R/ (images/ for R = 1) when it exists, otherwise images_F for the largest F dividing R that
-// exists (a folder is only ever downsampled). Throws naming the root and the folders looked for.
-ImageFolderChoice choose_image_folder(const std::filesystem::path& root, int resolution);
+// Folder: images_R/ (images/ for R = 1) when it exists, otherwise images_F for the largest F dividing R
+// that exists. Largest: images_F for the smallest F dividing R that exists (images/ first). A folder is
+// only ever downsampled. Throws naming the root and the folders looked for.
+ImageFolderChoice choose_image_folder(const std::filesystem::path& root, int resolution,
+                                      ImageSource source = ImageSource::Folder);
 
 // Length of an image side after area resampling by `factor`: round_half_even(length / factor), at
 // least 1 (the rounding of the 3DGS loader, whose Python round() is half-to-even).

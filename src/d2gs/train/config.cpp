@@ -87,15 +87,24 @@ void TrainConfig::validate() const {
     if (it < 1 || it > iterations) fail("test iteration {} is outside 1..{}", it, iterations);
 }
 
+SceneLoadOptions scene_load_options(const TrainConfig& c) {
+  SceneLoadOptions lo;
+  lo.resolution = c.resolution;
+  lo.background = c.white_background ? glm::vec3(1.0f) : glm::vec3(0.0f);
+  lo.image_source = c.image_source;
+  return lo;
+}
+
 void to_json(nlohmann::json& j, const TrainConfig& c) {
   j = nlohmann::json{
       {"source", c.source}, {"model_dir", c.model_dir}, {"resolution", c.resolution}, {"n_views", c.n_views},
       {"train_views", c.train_views}, {"test_views", c.test_views}, {"white_background", c.white_background},
-      {"method", to_string(c.method)}, {"iterations", c.iterations}, {"seed", c.seed}, {"init", c.init},
+      {"image_source", to_string(c.image_source)}, {"method", to_string(c.method)}, {"iterations", c.iterations}, {"seed", c.seed}, {"init", c.init},
       {"random_points", c.random_points},
       {"position_lr", c.lr.means}, {"position_lr_final", c.position_lr_final}, {"sh_dc_lr", c.lr.sh_dc},
       {"sh_rest_lr", c.lr.sh_rest}, {"opacity_lr", c.lr.opacity}, {"scaling_lr", c.lr.scales},
-      {"rotation_lr", c.lr.quats}, {"lambda_dssim", c.lambda_dssim}, {"sh_degree", c.sh_degree},
+      {"rotation_lr", c.lr.quats}, {"lambda_dssim", c.lambda_dssim},
+      {"alpha_clamp_grad", c.alpha_clamp_pass_through ? "pass-through" : "exact"}, {"sh_degree", c.sh_degree},
       {"sh_increase_every", c.sh_increase_every},
       {"densify_grad_threshold", c.densify.grad_threshold}, {"percent_dense", c.densify.percent_dense},
       {"min_opacity", c.densify.min_opacity}, {"densify_from", c.densify_from}, {"densify_until", c.densify_until},
@@ -138,6 +147,7 @@ void update_from_json(TrainConfig& c, const nlohmann::json& j) {
     c.train_views = k["train_views"].get<std::vector<int>>();
     c.test_views = k["test_views"].get<std::vector<int>>();
     c.white_background = k["white_background"];
+    c.image_source = enum_from<ImageSource>(k["image_source"], {{"folder", ImageSource::Folder}, {"largest", ImageSource::Largest}}, "image_source");
     c.method = method_from_string(k["method"]);
     c.iterations = k["iterations"];
     c.seed = k["seed"];
@@ -151,6 +161,7 @@ void update_from_json(TrainConfig& c, const nlohmann::json& j) {
     c.lr.scales = k["scaling_lr"];
     c.lr.quats = k["rotation_lr"];
     c.lambda_dssim = k["lambda_dssim"];
+    c.alpha_clamp_pass_through = enum_from<bool>(k["alpha_clamp_grad"], {{"exact", false}, {"pass-through", true}}, "alpha_clamp_grad");
     c.sh_degree = k["sh_degree"];
     c.sh_increase_every = k["sh_increase_every"];
     c.densify.grad_threshold = k["densify_grad_threshold"];

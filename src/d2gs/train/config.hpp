@@ -12,6 +12,7 @@
 #include "d2gs/train/densify.hpp"
 #include "d2gs/train/dropout.hpp"
 #include "d2gs/train/losses.hpp"
+#include "d2gs/scene/scene.hpp"
 
 namespace d2gs {
 
@@ -27,6 +28,9 @@ struct TrainConfig {
   int n_views = 0;                    // 0 = every non-test view
   std::vector<int> train_views, test_views;
   bool white_background = false;
+  // Training and test images: the prepared images_R/ folder, or the largest folder resized with PIL's
+  // bicubic as the original code does (scene.hpp, ImageSource). Eval scores against the same source.
+  ImageSource image_source = ImageSource::Folder;
 
   // method
   Method method = Method::Gs3d;
@@ -42,6 +46,9 @@ struct TrainConfig {
   LearningRates lr;
   float position_lr_final = 1.6e-6f;  // times the scene extent
   float lambda_dssim = 0.2f;          // L = L1 + λ·(1 − SSIM)
+  // Gradient through the rasterizer's alpha clamp min(0.99, o G): false = its derivative (0 where the clamp
+  // is active), true = as if unclamped, the original rasterizer's rule (render/raster_math.hpp).
+  bool alpha_clamp_pass_through = false;
   int sh_degree = 3;
   int sh_increase_every = 1000;
 
@@ -81,6 +88,9 @@ struct TrainConfig {
   // Throws d2gs::Error for impossible values, naming the option.
   void validate() const;
 };
+
+// How the run's scene is loaded (resolution, background, image source).
+SceneLoadOptions scene_load_options(const TrainConfig& c);
 
 void to_json(nlohmann::json& j, const TrainConfig& c);
 // Reads the keys present in `j` into `c` (others keep their values); an unknown key is an error.

@@ -225,10 +225,7 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
   config.validate();
   s.cfg = std::move(config);
   check_model_dir(s.cfg, !resume_from.empty());
-  SceneLoadOptions lo;
-  lo.resolution = s.cfg.resolution;
-  lo.background = s.cfg.white_background ? glm::vec3(1.0f) : glm::vec3(0.0f);
-  s.scene = load_scene(s.cfg.source, lo);
+  s.scene = load_scene(s.cfg.source, scene_load_options(s.cfg));
   SplitOptions so;
   so.n_views = s.cfg.n_views;
   so.train_views = s.cfg.train_views;
@@ -340,6 +337,7 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
   cfg_json["init_is_oracle"] = s.oracle_init;
   cfg_json["scene_extent"] = s.extent;
   cfg_json["split"] = {{"train", s.split.train}, {"test", s.split.test}};
+  cfg_json["images_folder"] = s.scene.images_folder;
   write_file_atomic(s.out() / "config.json", cfg_json.dump(2));
   write_cameras_json(s);
   s.log.open(s.out() / "train_log.jsonl", s.iteration > 0 ? std::ios::app : std::ios::trunc);
@@ -412,6 +410,7 @@ IterationRecord Trainer::step() {
   render::RenderOptions ro;
   ro.background = s.scene.background;
   ro.sh_degree = s.active_sh;
+  ro.alpha_clamp_pass_through = cfg.alpha_clamp_pass_through;
   const auto& out = s.rasterizer->forward(s.model, multiplier, s.train_cameras[static_cast<std::size_t>(view)], ro);
   const std::size_t values = out.rgb.size();
   s.pred.resize(values);
@@ -581,6 +580,8 @@ void Trainer::run() {
     j["gaussians"] = s.model.size();
     j["train_seconds"] = s.elapsed();
     j["init_is_oracle"] = s.oracle_init;
+    j["image_source"] = to_string(s.scene.image_source);
+    j["images_folder"] = s.scene.images_folder;
     write_file_atomic(s.out() / "results.json", j.dump(2));
     if (!cfg.quiet) std::fprintf(stdout, "%s", format_table(e).c_str());
   }
