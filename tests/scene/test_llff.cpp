@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "d2gs/core/npy.hpp"
+#include "d2gs/core/resize_pil.hpp"
 #include "d2gs/scene/colmap.hpp"
 #include "d2gs/scene/llff.hpp"
 #include "d2gs/scene/scene.hpp"
@@ -85,6 +86,36 @@ TEST(Llff, FernQuarterUsesImages4AndHalfIsAnError) {
   expect_error([] { load_scene(test::fern_dir(), res(1)); }, {"fern", "-r 1", "images/"});
   expect_error([] { load_scene(test::fern_dir(), res(3)); }, {"1, 2, 4 or 8", "3"});
   expect_error([] { load_scene(test::fern_dir(), res(16)); }, {"16"});
+}
+
+// --image-source largest: fern's largest folder is images_4; -r 8 halves it with PIL's bicubic (the
+// original loader's resize), with the same cameras as images_8.
+TEST(Llff, LargestSourceResizesImages4WithPilBicubic) {
+  SceneLoadOptions o = res(8);
+  o.image_source = ImageSource::Largest;
+  const Scene s = load_scene(test::fern_dir(), o);
+  const Scene ref = load_scene(test::fern_dir(), res(8));
+  EXPECT_EQ(s.images_folder, "images_4");
+  EXPECT_EQ(s.image_source, ImageSource::Largest);
+  ASSERT_EQ(s.cameras.size(), ref.cameras.size());
+  for (std::size_t k = 0; k < s.cameras.size(); ++k) {
+    EXPECT_EQ(s.cameras[k].width, 504);
+    EXPECT_EQ(s.cameras[k].height, 378);
+    EXPECT_EQ(s.cameras[k].resample_factor, 2);
+    EXPECT_EQ(s.cameras[k].fx, ref.cameras[k].fx);
+    EXPECT_EQ(s.cameras[k].cx, ref.cameras[k].cx);
+  }
+  const Image a = load_image(s, 3);
+  const Image expect = resize_pil_bicubic(read_image(test::fern_dir() / "images_4" / "image003.png"), 504, 378);
+  ASSERT_EQ(a.pixels.size(), expect.pixels.size());
+  EXPECT_EQ(a.pixels, expect.pixels);
+  // Not the prepared images_8 file, nor its area-resampled twin: another filter, the same picture.
+  const Image prepared = load_image(ref, 3);
+  double diff = 0.0;
+  for (std::size_t i = 0; i < a.pixels.size(); ++i) diff += std::abs(a.pixels[i] - prepared.pixels[i]);
+  diff /= static_cast<double>(a.pixels.size());
+  EXPECT_GT(diff, 1e-4);
+  EXPECT_LT(diff, 0.03);
 }
 
 TEST(Llff, EighthResampledFromImages4MatchesImages8) {

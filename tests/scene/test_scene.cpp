@@ -47,6 +47,21 @@ TEST(Scene, ChooseImageFolder) {
   EXPECT_EQ(c.folder, "images");
   EXPECT_EQ(c.resample, 4);
   expect_error([&] { choose_image_folder(dir, 0); }, {"1, 2, 4 or 8"});
+  // Largest: the smallest factor present that divides R (images/ first), never an upsampling.
+  fs::create_directories(dir / "images_2");
+  c = choose_image_folder(dir, 8, ImageSource::Largest);
+  EXPECT_EQ(c.folder, "images");
+  EXPECT_EQ(c.resample, 8);
+  fs::remove(dir / "images");
+  c = choose_image_folder(dir, 8, ImageSource::Largest);
+  EXPECT_EQ(c.folder, "images_2");
+  EXPECT_EQ(c.resample, 4);
+  c = choose_image_folder(dir, 8, ImageSource::Folder);
+  EXPECT_EQ(c.folder, "images_8");
+  expect_error([&] { choose_image_folder(dir, 1, ImageSource::Largest); }, {"images/", "images_2/, images_8/"});
+  EXPECT_EQ(image_source_from_string("largest"), ImageSource::Largest);
+  EXPECT_STREQ(to_string(ImageSource::Folder), "folder");
+  expect_error([] { image_source_from_string("pil"); }, {"'pil'", "folder, largest"});
   expect_error([&] { choose_image_folder(dir / "nothing", 2); }, {"nothing", "images_2/, images/"});
 }
 

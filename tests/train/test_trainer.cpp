@@ -216,7 +216,7 @@ TEST(Trainer, SavesAndTestsBeforeTheIterationsOpacityReset) {
   std::ifstream log(dir / "run/train_log.jsonl");
   for (std::string line; std::getline(log, line);) {
     const auto j = nlohmann::json::parse(line);
-    if (j.value("event", "") == "test") psnr[j["iteration"].get<int>()] = j["psnr"].get<double>();
+    if (j.value("event", "") == "test") psnr[j["iteration"].get<int>()] = j["mean"]["PSNR"].get<double>();
   }
   ASSERT_EQ(psnr.size(), 3u);
   EXPECT_NEAR(psnr[3], psnr[2], 0.5);  // the reset has not happened yet when iteration 3 is scored
@@ -249,11 +249,45 @@ TEST(Trainer, RunFolderServesEvalAndImrCommands) {
   EXPECT_NE(bad.output.find("config.json"), std::string::npos) << bad.output;
 }
 
+// --image-source largest is recorded and eval scores against the source the run was trained on (or the one
+// asked for): the renders are the same, the ground truth is not.
+TEST(Trainer, ImageSourceIsRecordedAndEvalScoresAgainstIt) {
+  const auto dir = test::scratch_dir();
+  const auto run = dir / "run";
+  const auto r = test::run_cli(fmt::format(
+      "-q train -s '{}' -m '{}' -r 8 --n-views 3 --iterations 4 --init random --random-points 2000 "
+      "--image-source largest --alpha-clamp-grad pass-through",
+      (test::shared_data() / "nerf_llff_data/fern").string(), run.string()));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const auto cfg = nlohmann::json::parse(read_file(run / "config.json"));
+  EXPECT_EQ(cfg["image_source"], "largest");
+  EXPECT_EQ(cfg["images_folder"], "images_4");
+  EXPECT_EQ(cfg["alpha_clamp_grad"], "pass-through");
+  const auto trained = nlohmann::json::parse(read_file(run / "results.json"));
+  EXPECT_EQ(trained["image_source"], "largest");
+  const auto e = test::run_cli(fmt::format("-q eval -m '{}' --json", run.string()));
+  ASSERT_EQ(e.exit_code, 0) << e.output;
+  const auto same = nlohmann::json::parse(read_file(run / "results.json"));
+  EXPECT_EQ(same["image_source"], "largest");
+  EXPECT_NEAR(same["mean"]["PSNR"].get<double>(), trained["mean"]["PSNR"].get<double>(), 1e-9);
+  const auto f = test::run_cli(fmt::format("-q eval -m '{}' --json --image-source folder", run.string()));
+  ASSERT_EQ(f.exit_code, 0) << f.output;
+  const auto other = nlohmann::json::parse(read_file(run / "results.json"));
+  EXPECT_EQ(other["image_source"], "folder");
+  EXPECT_EQ(other["images_folder"], "images_8");
+  EXPECT_NE(other["mean"]["PSNR"].get<double>(), trained["mean"]["PSNR"].get<double>());
+  EXPECT_NEAR(other["mean"]["PSNR"].get<double>(), trained["mean"]["PSNR"].get<double>(), 1.0);
+  const auto bad = test::run_cli(fmt::format("-q eval -m '{}' --image-source pil", run.string()));
+  EXPECT_NE(bad.exit_code, 0);
+}
+
 TEST(TrainConfig, JsonRoundTripAndUnknownKeys) {
   TrainConfig c;
   c.source = "s";
   c.model_dir = "m";
   c.method = Method::D2gs;
+  c.image_source = ImageSource::Largest;  // not the default
+  c.alpha_clamp_pass_through = true;       // not the default
   c.dd_drop.weight_depth = 0.7;
   c.dafe_loss_form = DafeLossForm::Paper;  // not the default
   c.opacity_reset_at = {100};
@@ -267,6 +301,8 @@ TEST(TrainConfig, JsonRoundTripAndUnknownKeys) {
   EXPECT_THROW(update_from_json(d, nlohmann::json{{"iteratons", 5}}), Error);
   EXPECT_THROW(update_from_json(d, nlohmann::json{{"iterations", "many"}}), Error);
   EXPECT_THROW(update_from_json(d, nlohmann::json{{"method", "nerf"}}), Error);
+  EXPECT_THROW(update_from_json(d, nlohmann::json{{"image_source", "pil"}}), Error);
+  EXPECT_THROW(update_from_json(d, nlohmann::json{{"alpha_clamp_grad", "none"}}), Error);
 }
 
 }  // namespace
