@@ -7,7 +7,7 @@ set -euo pipefail
 packages=(
   build-essential cmake ninja-build pkg-config
   libglm-dev libnanoflann-dev nlohmann-json3-dev libcli11-dev libspdlog-dev libfmt-dev
-  libomp-dev libopenblas-dev
+  libomp-dev libopenblas-dev libjpeg-dev
   libopencv-core-dev libopencv-imgproc-dev libopencv-imgcodecs-dev
   libopencv-features2d-dev libopencv-calib3d-dev libopencv-dnn-dev
   libgtest-dev libgmock-dev libbenchmark-dev
