@@ -46,16 +46,18 @@ for t in "${targets[@]}"; do
   rm -rf "$findings"
   mkdir -p "$corpus" "$findings"
   log=build-fuzz/$t.log
+  started=$SECONDS
   set +e
   "build-fuzz/fuzz/$t" -max_total_time="$seconds" -timeout=10 -rss_limit_mb=2048 -print_final_stats=1 \
     -artifact_prefix="$findings/" "$corpus" "fuzz/corpus/$t" >"$log" 2>&1
   rc=$?
   set -e
+  elapsed=$((SECONDS - started))
   runs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1)
   cov=$(grep -o 'cov: [0-9]*' "$log" | tail -1 | cut -d' ' -f2)
   ft=$(grep -o 'ft: [0-9]*' "$log" | tail -1 | cut -d' ' -f2)
   found=$(find "$findings" -type f | wc -l)
-  line="$t: ${runs:-?} executions in ${seconds} s, cov ${cov:-?}, ft ${ft:-?}, corpus $(find "$corpus" -type f | wc -l) files, findings $found"
+  line="$t: ${runs:-?} executions in ${elapsed} s, cov ${cov:-?}, ft ${ft:-?}, corpus $(find "$corpus" -type f | wc -l) files, findings $found"
   if [ "$rc" -ne 0 ]; then
     status=1
     line+=" — FAILED (exit $rc; log $log)"
