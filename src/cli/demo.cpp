@@ -15,6 +15,7 @@
 #include <spdlog/spdlog.h>
 
 #include "cli/commands.hpp"
+#include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/image.hpp"
 #include "d2gs/core/npy.hpp"
@@ -82,6 +83,21 @@ int run_demo(const DemoOptions& opt) {
   scene.views = opt.views;
   validate(scene);
   const std::filesystem::path dir = opt.output;
+  check_output_folder(dir);
+  if (!opt.scene_only) {
+    // The training split of the scene to be written, checked before any view is rendered.
+    Scene planned;
+    planned.root = dir;
+    planned.format = SceneFormat::Llff;
+    planned.cameras = synthetic_scene_cameras(scene);
+    SplitOptions so;
+    so.n_views = opt.train_views;
+    try {
+      make_split(planned, so);
+    } catch (const Error& e) {
+      fail("demo: --views {} with --n-views {}: {}", opt.views, opt.train_views, e.what());
+    }
+  }
   // Progress on one line when stderr is a terminal and progress lines are wanted.
   const bool show = spdlog::default_logger()->should_log(spdlog::level::info);
   const bool tty = ::isatty(STDERR_FILENO) != 0;
@@ -113,7 +129,7 @@ int run_demo(const DemoOptions& opt) {
   std::error_code ec;
   if (std::filesystem::exists(run_dir / "config.json", ec)) std::filesystem::remove_all(run_dir, ec);  // an earlier demo's
   TrainConfig c;
-  c.source = dir.string();
+  c.source = std::filesystem::absolute(dir).lexically_normal().string();  // recorded absolute, as d2gs train does
   c.model_dir = run_dir.string();
   c.resolution = opt.resolution;
   c.n_views = opt.train_views;
@@ -166,7 +182,9 @@ Run add_demo_command(CLI::App& app) {
       "views with the default settings of d2gs train --method d2gs (the release preset), evaluate the held-out views and write the HTML report (RUN = OUTPUT/run)");
   sub->add_option("-o,--output", opt->output, "Folder to write (created; refused if it holds other data)")
       ->capture_default_str();
-  sub->add_option("--seed", opt->seed, "Seed of the scene (layout jitter, colours, textures)")->capture_default_str();
+  sub->add_option("--seed", opt->seed, "Seed of the scene (layout jitter, colours, textures)")
+      ->capture_default_str()
+      ->check(not_negative());
   sub->add_option("--views", opt->views, "Number of cameras")->capture_default_str()->check(CLI::Range(2, 1000));
   sub->add_flag("--scene-only", opt->scene_only, "Only generate the scene (no training, no report)");
   sub->add_option("--iterations", opt->iterations, "Training iterations of the demo run")

@@ -8,6 +8,7 @@
 #include "cli/commands.hpp"
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
+#include "d2gs/core/json_value.hpp"
 #include "d2gs/eval/evaluate.hpp"
 #include "d2gs/model/ply.hpp"
 #include "d2gs/report/run_report.hpp"
@@ -53,10 +54,14 @@ Run add_eval_command(CLI::App& app) {
   auto json_only = std::make_shared<bool>(false);
   auto lpips_weights = std::make_shared<std::string>();
   auto lpips_range = std::make_shared<std::string>("unit");
+  auto source = std::make_shared<std::string>();
   if (const char* env = std::getenv("D2GS_LPIPS_WEIGHTS")) *lpips_weights = env;
   cmd->add_option("-m,--model-path", *model_dir, "Run folder written by d2gs train")->required();
   cmd->add_option("--iteration", *iteration, "Model iteration to evaluate (default: the last saved)");
   cmd->add_flag("--json", *json_only, "Print the results as JSON instead of a table");
+  cmd->add_option("-s,--source", *source,
+                  "Scene folder (default: the one recorded in MODEL/config.json; a relative recorded path is taken "
+                  "relative to MODEL, else to the working folder)");
   cmd->add_option("--lpips-weights", *lpips_weights,
                   "LPIPS weights (.safetensors, VGG16 or AlexNet; default: $D2GS_LPIPS_WEIGHTS)");
   cmd->add_option("--lpips-input-range", *lpips_range,
@@ -67,27 +72,37 @@ Run add_eval_command(CLI::App& app) {
                   "Ground-truth images: as the run was trained (default, from its config.json), or 'folder' / "
                   "'largest' to score the same renders against another source (see d2gs train --image-source)")
       ->check(CLI::IsMember({"folder", "largest"}));
-  return [model_dir, iteration, json_only, lpips_weights, lpips_range, image_source]() -> int {
+  return [model_dir, iteration, json_only, lpips_weights, lpips_range, source, image_source]() -> int {
     // Options first, so that a bad weights file fails before any rendering.
     const LpipsInputRange range = parse_lpips_input_range(*lpips_range, "--lpips-input-range");
     std::optional<Lpips> lpips;
     if (!lpips_weights->empty()) lpips.emplace(Lpips::load(*lpips_weights));
     const fs::path run = *model_dir;
     const fs::path cfg_path = run / "config.json";
-    nlohmann::json cj;
-    try {
-      cj = nlohmann::json::parse(read_file(cfg_path));
-    } catch (const nlohmann::json::parse_error& e) {
-      fail_file(cfg_path, "invalid JSON ({})", e.what());
-    }
+    nlohmann::json cj = read_json_file(cfg_path);
     if (!cj.contains("split") || !cj["split"].contains("test")) fail_file(cfg_path, "has no recorded split");
-    const std::vector<int> test = cj["split"]["test"].get<std::vector<int>>();
-    const bool oracle = cj.value("init_is_oracle", false);
-    for (const char* recorded : {"init_is_oracle", "scene_extent", "split", "images_folder"}) cj.erase(recorded);
+    std::vector<int> test;
     TrainConfig c;
-    update_from_json(c, cj);
+    bool oracle = false;
+    try {
+      test = json_number_list<int>(cj["split"]["test"], "split.test", 0);
+      if (cj.contains("init_is_oracle") && !cj["init_is_oracle"].is_boolean())
+        fail("key 'init_is_oracle' must be true or false");
+      oracle = cj.value("init_is_oracle", false);
+      for (const char* recorded : {"init_is_oracle", "scene_extent", "split", "images_folder"}) cj.erase(recorded);
+      update_from_json(c, cj);
+    } catch (const Error& e) {
+      fail_file(cfg_path, "{}", e.what());
+    }
     if (!image_source->empty()) c.image_source = image_source_from_string(*image_source);
-    const Scene scene = load_scene(c.source, scene_load_options(c));
+    fs::path scene_dir = *source;
+    if (scene_dir.empty()) {
+      scene_dir = recorded_source(run, c.source);
+      std::error_code ec;
+      if (!fs::is_directory(scene_dir, ec))
+        fail_file(cfg_path, "records the scene '{}', which is not a folder from here (give the scene with -s)", c.source);
+    }
+    const Scene scene = load_scene(scene_dir, scene_load_options(c));
     for (int v : test)
       if (v < 0 || static_cast<std::size_t>(v) >= scene.cameras.size()) fail_file(cfg_path, "test view {} is not in the scene", v);
     const int it = pick_iteration(run, *iteration);

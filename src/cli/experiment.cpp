@@ -7,6 +7,7 @@
 #include <string>
 
 #include "cli/commands.hpp"
+#include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/log.hpp"
 #include "d2gs/experiment/collect.hpp"
@@ -39,6 +40,7 @@ void print_collect(const experiment::CollectResult& r) {
 
 int run_experiment_command(const ExperimentOptions& o) {
   const fs::path out = fs::absolute(o.out).lexically_normal();
+  check_output_folder(out);  // an -o under a file fails now, not after the runs
   const auto progress = [](const std::string& line) { spdlog::info("experiment: {}", line); };
   experiment::ExperimentConfig config;
   std::vector<experiment::RunSpec> runs;

@@ -8,6 +8,7 @@
 // Reference camera: camera K (default 0, the release's first test camera = global image 0) of the scene
 // given with -s; without -s an identity camera at the origin is used (with a warning).
 #include <algorithm>
+#include <cmath>
 #include <chrono>
 #include <filesystem>
 #include <memory>
@@ -19,10 +20,12 @@
 #include "cli/commands.hpp"
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
+#include "d2gs/core/json_value.hpp"
 #include "d2gs/core/log.hpp"
 #include "d2gs/eval/imr.hpp"
 #include "d2gs/model/ply.hpp"
 #include "d2gs/scene/scene.hpp"
+#include "d2gs/train/config.hpp"
 
 namespace d2gs::cli {
 namespace {
@@ -80,7 +83,21 @@ nlohmann::json transport_json(const TransportResult& t) {
 }
 
 int run_imr(const ImrCommandOptions& o) {
+  // Every option first: a bad value fails before any model is loaded.
+  CostStorage storage = CostStorage::StoredFloat;
+  if (o.cost == "stored") storage = CostStorage::StoredFloat;
+  else if (o.cost == "stored-double") storage = CostStorage::StoredDouble;
+  else if (o.cost == "on-the-fly") storage = CostStorage::OnTheFly;
+  else fail("option --cost must be stored, stored-double or on-the-fly (got '{}')", o.cost);
   if (o.inputs.size() < 2) fail("imr needs at least 2 models, got {}", o.inputs.size());
+  if (!(o.epsilon > 0.0) || !std::isfinite(o.epsilon)) fail("option --epsilon must be positive (got {})", o.epsilon);
+  if (!(o.tolerance >= 0.0) || !std::isfinite(o.tolerance))
+    fail("option --tolerance must be ≥ 0 (got {})", o.tolerance);
+  if (o.max_iterations < 1) fail("option --max-iterations must be ≥ 1 (got {})", o.max_iterations);
+  if (o.reference_camera < 0) fail("option --reference-camera must be ≥ 0 (got {})", o.reference_camera);
+  if (o.threads < 0) fail("option --threads must be ≥ 0 (got {})", o.threads);
+  if (!o.source.empty()) check_resolution(o.resolution);
+  if (!o.json.empty()) check_output_file(o.json);
   ImrOptions options;
   options.mixture.samples = o.samples;
   options.cost.shape = o.exact_bures ? ShapeCost::ExactBures : ShapeCost::TaylorBures;
@@ -107,10 +124,7 @@ int run_imr(const ImrCommandOptions& o) {
     };
   }
   options.debiased = o.debiased;
-  if (o.cost == "stored") options.storage = CostStorage::StoredFloat;
-  else if (o.cost == "stored-double") options.storage = CostStorage::StoredDouble;
-  else if (o.cost == "on-the-fly") options.storage = CostStorage::OnTheFly;
-  else fail("--cost must be stored, stored-double or on-the-fly (got '{}')", o.cost);
+  options.storage = storage;
 
   Camera reference;
   std::string reference_name = "identity camera at the origin";
@@ -122,12 +136,18 @@ int run_imr(const ImrCommandOptions& o) {
       const fs::path cfg = fs::path(input) / "config.json";
       if (!fs::is_regular_file(cfg)) continue;
       try {
-        const auto j = nlohmann::json::parse(read_file(cfg));
-        source = j.at("source").get<std::string>();
-        resolution = j.at("resolution").get<int>();
+        const auto j = read_json_file(cfg);
+        if (!j.is_object() || !j.contains("source") || !j["source"].is_string() || !j.contains("resolution"))
+          fail("no 'source' string and 'resolution'");
+        resolution = json_number<int>(j["resolution"], "resolution");
+        check_resolution(resolution);
+        source = recorded_source(input, j["source"].get<std::string>()).string();
+        if (!fs::is_directory(source)) fail("the recorded scene '{}' is not a folder from here (give it with -s)", source);
         break;
       } catch (const nlohmann::json::exception& e) {
         fail_file(cfg, "cannot read the run's scene ({})", e.what());
+      } catch (const Error& e) {
+        fail_file(cfg, "cannot read the run's scene: {}", e.what());
       }
     }
   }
@@ -149,13 +169,23 @@ int run_imr(const ImrCommandOptions& o) {
   for (const auto& input : o.inputs) {
     const std::filesystem::path path = resolve_model(input);
     const Gaussians model = read_gaussians_ply(path);
-    mixtures.push_back(mixture_from_model(model, reference, options.mixture));
+    if (model.size() == 0) fail_file(path, "the model has no Gaussians (0 vertices); IMR compares distributions");
+    try {
+      mixtures.push_back(mixture_from_model(model, reference, options.mixture));
+    } catch (const Error& e) {
+      fail_file(path, "{}", e.what());
+    }
     spdlog::info("imr: model {}: {} ({} Gaussians, {} components)", mixtures.size() - 1, path.string(), model.size(),
                  mixtures.back().size());
     models.push_back({{"input", input}, {"ply", path.string()}, {"gaussians", model.size()},
                       {"components", mixtures.back().size()}});
   }
 
+  // Identical inputs (the same Gaussians) are said so: their S is the entropic bias alone, not a difference.
+  const auto identical = [&mixtures](std::size_t a, std::size_t b) {
+    return mixtures[a].weights == mixtures[b].weights && mixtures[a].means == mixtures[b].means &&
+           mixtures[a].covariances == mixtures[b].covariances;
+  };
   const ImrResult result = compute_imr(mixtures, options, [](const std::string& line) { spdlog::info("imr: {}", line); });
 
   std::printf("IMR of %zu models: cost %s%s%s, eps %g, samples %zu, tolerance %g, %s; reference: %s\n",
@@ -164,21 +194,35 @@ int run_imr(const ImrCommandOptions& o) {
               to_string(options.storage), reference_name.c_str());
   std::printf("%-6s %14s %12s %12s %6s %11s %5s%s\n", "pair", "S", "d", "scale", "iters", "marg.err", "conv",
               o.debiased ? "       debiased" : "");
+  std::size_t unconverged = 0, same = 0;
   for (const auto& p : result.pairs) {
     const auto& t = p.transport;
     std::printf("%-6s %14.6g %12.6g %12.6g %6d %11.3g %5s", fmt::format("{}-{}", p.a, p.b).c_str(), t.transport_cost,
                 p.distance, t.scale, t.iterations, t.marginal_error, t.converged ? "yes" : "NO");
     if (p.debiased) std::printf(" %14.6g", *p.debiased);
+    if (identical(p.a, p.b)) std::printf("  (identical models)");
     std::printf("\n");
+    same += identical(p.a, p.b) ? 1 : 0;
+    if (!t.converged) {
+      ++unconverged;
+      spdlog::warn("imr: pair {}-{} did not converge: stopped at --max-iterations {} with a potential change of {:.3g} "
+                   "(tolerance {:.3g}); its S is approximate",
+                   p.a, p.b, t.iterations, t.last_change, o.tolerance);
+    }
   }
   for (std::size_t k = 0; k < result.self.size(); ++k)
     std::printf("self %zu: S(%zu,%zu) = %.6g (%d iterations)\n", k, k, k, result.self[k].transport_cost,
                 result.self[k].iterations);
-  std::printf("IMR = %.6f\n", result.imr);
+  std::printf("IMR = %.6f%s\n", result.imr,
+              unconverged ? fmt::format(" (APPROXIMATE: {} of {} transport problems did not converge)", unconverged,
+                                        result.pairs.size()).c_str()
+                          : "");
   if (result.imr_debiased) std::printf("IMR (debiased) = %.6f\n", *result.imr_debiased);
-  bool all_converged = true;
-  for (const auto& p : result.pairs) all_converged = all_converged && p.transport.converged;
-  if (!all_converged) spdlog::warn("imr: some transport problems did not converge within --max-iterations");
+  else if (o.debiased) std::printf("IMR (debiased): undefined, every debiased divergence is 0\n");
+  if (same > 0)
+    std::printf("note: %s identical (the same Gaussians): S of identical models is the entropic bias S(A,A) of the "
+                "regularised transport, not a difference between runs; --debiased removes it (docs/imr.md)\n",
+                same == result.pairs.size() ? "all models are" : fmt::format("{} pair(s) of models are", same).c_str());
 
   if (!o.json.empty()) {
     nlohmann::json out;
@@ -196,6 +240,7 @@ int run_imr(const ImrCommandOptions& o) {
       j["b"] = p.b;
       j["distance"] = p.distance;
       if (p.debiased) j["debiased_divergence"] = *p.debiased;
+      j["identical_models"] = identical(p.a, p.b);
       pairs.push_back(j);
     }
     out["pairs"] = pairs;
@@ -203,6 +248,7 @@ int run_imr(const ImrCommandOptions& o) {
     for (const auto& t : result.self) self.push_back(transport_json(t));
     if (!result.self.empty()) out["self"] = self;
     out["imr"] = result.imr;
+    out["converged"] = unconverged == 0;
     if (result.imr_debiased) out["imr_debiased"] = *result.imr_debiased;
     write_file_atomic(o.json, out.dump(2) + "\n");
   }
@@ -221,7 +267,9 @@ Run add_imr_command(CLI::App& app) {
   sub->add_option("--reference-camera", o->reference_camera, "Camera index in the scene (0 = release: image 0)")
       ->capture_default_str();
   sub->add_option("--epsilon", o->epsilon, "Entropic regularisation (on the normalised cost)")->capture_default_str();
-  sub->add_option("--samples", o->samples, "Depth-strata sample count n (0 = all Gaussians)")->capture_default_str();
+  sub->add_option("--samples", o->samples, "Depth-strata sample count n (0 = all Gaussians)")
+      ->capture_default_str()
+      ->check(not_negative());
   sub->add_option("--tolerance", o->tolerance, "Stop when the log-potentials change less than this")
       ->capture_default_str();
   sub->add_option("--max-iterations", o->max_iterations, "Sinkhorn iteration limit")->capture_default_str();

@@ -49,7 +49,8 @@ Run add_init_command(CLI::App& app) {
   cmd->add_option("--train-views", o->train_views, "Explicit training views (global indices)")->delimiter(',');
   cmd->add_option("--test-views", o->test_views, "Explicit test views (global indices)")->delimiter(',');
   cmd->add_flag("--white-background", o->white_background, "White background (Blender scenes)");
-  cmd->add_option("--seed", o->geometry.seed, "Seed of the random choices (subsampling of large dense clouds)");
+  cmd->add_option("--seed", o->geometry.seed, "Seed of the random choices (subsampling of large dense clouds)")
+      ->check(not_negative());
   cmd->add_option("--max-features", o->geometry.max_features, "SIFT keypoints per view");
   cmd->add_option("--sift-contrast", o->geometry.sift_contrast_threshold,
                   "SIFT contrast threshold (lower: more keypoints in weak texture)");
@@ -83,6 +84,7 @@ Run add_init_command(CLI::App& app) {
     g.dense = !o->no_dense;
     const std::filesystem::path dir =
         o->output.empty() ? training_geometry_dir(scene, split.train.size()) : std::filesystem::path(o->output);
+    check_output_folder(dir);  // before the work: a path under a file fails now
     const TrainingGeometry geo = build_training_geometry(scene, split.train, g);
     write_training_geometry(dir, scene, geo, g);
     std::string line = fmt::format("init: {} sparse points (mean reprojection error {:.3f} px)", geo.sparse.size(),

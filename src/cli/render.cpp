@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "cli/commands.hpp"
+#include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/image.hpp"
 #include "d2gs/core/log.hpp"
@@ -40,7 +41,13 @@ struct RenderCommandOptions {
 int run_render(const RenderCommandOptions& o) {
   if (o.split != "test" && o.split != "train" && o.split != "all")
     fail("--split must be test, train or all (got '{}')", o.split);
+  const std::filesystem::path out_dir = o.output;
+  check_output_folder(out_dir);  // before any work: a path under a file fails now, not after rendering
   const Gaussians model = read_gaussians_ply(o.model);
+  if (model.size() == 0) fail_file(o.model, "the model has no Gaussians (0 vertices): nothing to render");
+  if (o.sh_degree > model.sh_degree)
+    fail("option --sh-degree {} is above the SH degree {} of the model {} (use 0..{}, or -1 for the model's)",
+         o.sh_degree, model.sh_degree, o.model, model.sh_degree);
   SceneLoadOptions load;
   load.resolution = o.resolution;
   load.background = glm::vec3(o.white_background ? 1.0f : 0.0f);
@@ -53,7 +60,6 @@ int run_render(const RenderCommandOptions& o) {
   else if (o.split == "train") views = split.train;
   else
     for (int i = 0; i < static_cast<int>(scene.cameras.size()); ++i) views.push_back(i);
-  const std::filesystem::path out_dir = o.output;
   std::filesystem::create_directories(out_dir);
 
   auto rasterizer = render::make_cpu_rasterizer();
@@ -102,7 +108,9 @@ Run add_render_command(CLI::App& app) {
   sub->add_option("--n-views", opts->n_views, "Training views of the split (0 = every non-test view)")
       ->capture_default_str();
   sub->add_option("--split", opts->split, "Views to render: test, train or all")->capture_default_str();
-  sub->add_option("--sh-degree", opts->sh_degree, "Active SH degree (-1 = the model's)")->capture_default_str();
+  sub->add_option("--sh-degree", opts->sh_degree, "Active SH degree, 0..3 and at most the model's (-1 = the model's)")
+      ->capture_default_str()
+      ->check(CLI::Range(-1, 3));
   sub->add_flag("--depth", opts->depth,
                 "Also write <name>_depth.npy (float32, view-space z / alpha) and <name>_depth.png (16-bit, z*1000)");
   sub->add_flag("--alpha", opts->alpha, "Also write <name>_alpha.png (8-bit accumulated opacity)");

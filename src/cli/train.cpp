@@ -6,6 +6,7 @@
 #include "cli/commands.hpp"
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
+#include "d2gs/core/json_value.hpp"
 #include "d2gs/report/run_report.hpp"
 #include "d2gs/train/presets.hpp"
 #include "d2gs/train/trainer.hpp"
@@ -54,7 +55,8 @@ Run add_train_command(CLI::App& app) {
                          ->check(CLI::IsMember({"3dgs", "dropgaussian", "d2gs"})),
                      "method");
   opt("--iterations", d.iterations, "iterations", "Training iterations");
-  opt("--seed", d.seed, "seed", "Seed of every random choice (same seed and input: same model)");
+  opt("--seed", d.seed, "seed", "Seed of every random choice (same seed and input: same model)")
+      ->check(not_negative());
   opt("--init", d.init, "init",
       "Initial points: 'dense' (default: stereo depth of the training views fused, as `d2gs init`; reuses "
       "SCENE/{N}_views or MODEL/init), 'sparse' (SIFT points triangulated from the training views), a PLY file, "
@@ -127,14 +129,13 @@ Run add_train_command(CLI::App& app) {
     flags["dafe_prior_kind"] = prior_kind->empty() ? "disparity" : *prior_kind;
     TrainConfig c;
     if (!config_file->empty()) {
-      nlohmann::json j;
-      try {
-        j = nlohmann::json::parse(read_file(*config_file));
-      } catch (const nlohmann::json::parse_error& e) {
-        fail_file(*config_file, "invalid JSON ({})", e.what());
-      }
+      nlohmann::json j = read_json_file(*config_file);
       for (const char* recorded : {"init_is_oracle", "scene_extent", "split", "images_folder"}) j.erase(recorded);  // saved for the record
-      update_from_json(c, j);
+      try {
+        update_from_json(c, j);
+      } catch (const Error& e) {
+        fail_file(*config_file, "{}", e.what());
+      }
     }
     // Presets apply over the file; explicit flags apply over both.
     if (!preset->empty()) {
@@ -149,6 +150,8 @@ Run add_train_command(CLI::App& app) {
     for (const auto& [option, key] : *keys)
       if (option->count() > 0) given[key] = flags[key];
     update_from_json(c, given);
+    // config.json records the scene absolute, so that eval and imr find it from any working folder.
+    if (!c.source.empty()) c.source = std::filesystem::absolute(c.source).lexically_normal().string();
     Trainer trainer(c, *resume);
     trainer.run();
     if (std::filesystem::is_regular_file(std::filesystem::path(c.model_dir) / "results.json"))

@@ -1,6 +1,8 @@
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <filesystem>
+#include <string>
 
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
@@ -43,6 +45,38 @@ TEST(AtomicFile, CreatesParentFoldersAndReportsUnwritable) {
   EXPECT_THROW(write_file_atomic(dir / "file/below.txt", "y"), Error);  // parent is a file
   EXPECT_THROW(read_file(dir / "nope.txt"), Error);
   EXPECT_THROW(read_file(dir), Error);
+}
+
+// Commands check where they will write before they work (check_output_folder / check_output_file).
+TEST(AtomicFile, OutputPathsAreCheckedBeforeAnythingIsWritten) {
+  const auto dir = test::scratch_dir();
+  write_file_atomic(dir / "file", "x");
+  const auto message = [](auto&& f) -> std::string {
+    try {
+      f();
+    } catch (const Error& e) {
+      return e.what();
+    }
+    return "";
+  };
+  // Folders that exist or can be created pass, and nothing is created.
+  EXPECT_EQ(message([&] { check_output_folder(dir); }), "");
+  EXPECT_EQ(message([&] { check_output_folder(dir / "new/deeper"); }), "");
+  EXPECT_EQ(message([&] { check_output_file(dir / "new/out.json"); }), "");
+  EXPECT_EQ(message([&] { check_output_file(dir / "file"); }), "");  // overwritten atomically
+  EXPECT_FALSE(fs::exists(dir / "new"));
+  // A folder that is a file, or a path under a file.
+  const std::string is_file = message([&] { check_output_folder(dir / "file"); });
+  EXPECT_NE(is_file.find((dir / "file").string() + ": exists and is not a folder"), std::string::npos) << is_file;
+  const std::string under = message([&] { check_output_folder(dir / "file/run/deeper"); });
+  EXPECT_NE(under.find((dir / "file/run/deeper").string() + ": cannot write here: "), std::string::npos) << under;
+  EXPECT_NE(under.find((dir / "file").string() + " is a file, not a folder"), std::string::npos) << under;
+  const std::string file_under = message([&] { check_output_file(dir / "file/imr.json"); });
+  EXPECT_NE(file_under.find((dir / "file/imr.json").string() + ": cannot write here"), std::string::npos) << file_under;
+  const std::string file_is_dir = message([&] { check_output_file(dir); });
+  EXPECT_NE(file_is_dir.find("is a folder"), std::string::npos) << file_is_dir;
+  EXPECT_NE(message([] { check_output_file(""); }), "");
+  EXPECT_EQ(std::count(under.begin(), under.end(), '\n'), 0);
 }
 
 }  // namespace

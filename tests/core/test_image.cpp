@@ -54,5 +54,43 @@ TEST(Image, CorruptAndMissingFilesAreErrors) {
   }
 }
 
+// A real photograph (room, JPEG) cut short: libjpeg pads the missing rows with grey and only warns, and
+// OpenCV passes the image on. It must be an error naming the file, as for a truncated PNG.
+TEST(Image, TruncatedJpegIsAnErrorNamingTheFile) {
+  const auto dir = test::scratch_dir();
+  const std::string jpeg = read_file(test::shared_data() / "llff_nex_reprocessed/room/images/img001.JPG");
+  ASSERT_GT(jpeg.size(), 10000u);
+  const Image whole = decode_image(jpeg, "img001.JPG");
+  EXPECT_EQ(whole.width, 996);
+  EXPECT_EQ(whole.height, 746);
+  for (const double kept : {0.6, 0.95}) {
+    const auto path = dir / "cut.jpg";
+    write_file_atomic(path, std::string_view(jpeg).substr(0, static_cast<std::size_t>(kept * jpeg.size())));
+    try {
+      read_image(path);
+      ADD_FAILURE() << "a JPEG cut to " << kept << " of its bytes was decoded";
+    } catch (const Error& e) {
+      const std::string msg = e.what();
+      EXPECT_NE(msg.find(path.string()), std::string::npos) << msg;
+      EXPECT_NE(msg.find("truncated JPEG"), std::string::npos) << msg;
+      EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
+    }
+    // The header is intact, so the size is still read without decoding.
+    EXPECT_EQ(read_image_size(path).width, 996);
+  }
+  // Only the end-of-image marker missing: the data is complete but the file is still cut.
+  write_file_atomic(dir / "no_eoi.jpg", std::string_view(jpeg).substr(0, jpeg.size() - 2));
+  EXPECT_THROW(read_image(dir / "no_eoi.jpg"), Error);
+  // Bytes after the end-of-image marker (some cameras append data) leave the image whole.
+  write_file_atomic(dir / "trailer.jpg", jpeg + "trailing bytes");
+  const Image trailer = read_image(dir / "trailer.jpg");
+  EXPECT_EQ(trailer.pixels, whole.pixels);
+  // A file that is not an image at all, and an empty one.
+  write_file_atomic(dir / "empty.jpg", "");
+  EXPECT_THROW(read_image(dir / "empty.jpg"), Error);
+  write_file_atomic(dir / "text.jpg", "\xFF\xD8\xFFnot really a jpeg");
+  EXPECT_THROW(read_image(dir / "text.jpg"), Error);
+}
+
 }  // namespace
 }  // namespace d2gs

@@ -85,6 +85,12 @@ TEST(Npy, BadInputsNameTheFile) {
   expect_error(npy_bytes("{'fortran_order': False, 'shape': (1,), }", std::string(16, '\0')), "descr");
   expect_error(npy_bytes("{'descr': '<`i2', 'fortran_order': False, 'shape': (1,), }", std::string(16, '\0')),
                "not supported");  // found by fuzz_npy: a non-numeric width
+  // Found by fuzz_npy (10-minute run, issue 21): a zero-width dtype with a huge shape passed the size check
+  // (any count of 0-byte values fits) and then asked for 720 GB of doubles.
+  expect_error(npy_bytes("{'descr': '|u0', 'fortran_order': False, 'shape': (89913560442812352,), }", ""),
+               "not supported");
+  expect_error(npy_bytes("{'descr': '<f2', 'fortran_order': False, 'shape': (2,), }", std::string(4, '\0')),
+               "not supported");
   EXPECT_THROW(read_npy(test::scratch_dir() / "missing.npy"), Error);
 }
 

@@ -560,5 +560,18 @@ TEST(DemoCommand, TrainsEvaluatesAndWritesTheReport) {
   EXPECT_EQ(config["n_views"], 3);
 }
 
+// `demo --views 3` leaves 2 non-test views for 3 training views: it used to fail only after rendering and
+// writing the whole scene.
+TEST(DemoCli, ImpossibleSplitFailsBeforeTheSceneIsWritten) {
+  const auto dir = test::scratch_dir();
+  const auto r = test::run_cli(fmt::format("demo -o '{}' --views 3", (dir / "demo").string()));
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find("--views 3 with --n-views 3"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(dir / "demo")) << r.output;
+  // --scene-only needs no split.
+  const auto only = test::run_cli(fmt::format("-q demo -o '{}' --views 3 --scene-only", (dir / "scene").string()));
+  EXPECT_EQ(only.exit_code, 0) << only.output;
+}
+
 }  // namespace
 }  // namespace d2gs

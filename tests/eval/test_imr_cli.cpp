@@ -95,5 +95,73 @@ TEST(ImrCli, WarnsWithoutSceneAndRejectsBadInput) {
   EXPECT_NE(empty_run.output.find("point_cloud/iteration_N"), std::string::npos) << empty_run.output;
 }
 
+// Options are checked before any model is read: the models here do not even exist.
+TEST(ImrCli, OptionsAreCheckedBeforeTheModelsAreLoaded) {
+  const auto dir = test::scratch_dir();
+  const std::string models = "'" + (dir / "a.ply").string() + "' '" + (dir / "b.ply").string() + "'";
+  for (const auto& [option, expected] : std::vector<std::pair<std::string, std::string>>{
+           {"--epsilon 0", "--epsilon must be positive"},
+           {"--epsilon -1", "--epsilon must be positive"},
+           {"--tolerance -1", "--tolerance"},
+           {"--max-iterations 0", "--max-iterations"},
+           {"--reference-camera -2", "--reference-camera"},
+           {"--threads -1", "--threads"},
+           {"--cost sparse", "--cost"},
+           {"-s somewhere -r 3", "1, 2, 4 or 8"}}) {
+    const auto r = test::run_cli("imr " + models + " " + option);
+    EXPECT_EQ(r.exit_code, 1) << option << "\n" << r.output;
+    EXPECT_NE(r.output.find(expected), std::string::npos) << option << "\n" << r.output;
+    EXPECT_EQ(r.output.find("no such model"), std::string::npos) << option << ": models were loaded first\n" << r.output;
+  }
+  const auto samples = test::run_cli("imr " + models + " --samples -1");
+  EXPECT_NE(samples.exit_code, 0) << samples.output;
+  EXPECT_NE(samples.output.find("--samples"), std::string::npos) << samples.output;
+  // --json under a file: refused before any work.
+  write_gaussians_ply(dir / "real.ply", random_model(50, 1));
+  const auto json = test::run_cli("imr '" + (dir / "real.ply").string() + "' '" + (dir / "real.ply").string() +
+                                  "' --json '" + (dir / "real.ply/out.json").string() + "'");
+  EXPECT_EQ(json.exit_code, 1) << json.output;
+  EXPECT_NE(json.output.find((dir / "real.ply/out.json").string() + ": cannot write here"), std::string::npos)
+      << json.output;
+  EXPECT_EQ(json.output.find("model 0"), std::string::npos) << json.output;
+}
+
+TEST(ImrCli, EmptyModelsAreNamedAndIdenticalModelsSaidSo) {
+  const auto dir = test::scratch_dir();
+  write_gaussians_ply(dir / "a.ply", random_model(200, 4));
+  write_gaussians_ply(dir / "empty.ply", Gaussians{});
+  const std::string a = "'" + (dir / "a.ply").string() + "'";
+  const auto empty = test::run_cli("imr " + a + " '" + (dir / "empty.ply").string() + "'");
+  EXPECT_EQ(empty.exit_code, 1) << empty.output;
+  EXPECT_NE(empty.output.find((dir / "empty.ply").string() + ": the model has no Gaussians"), std::string::npos)
+      << empty.output;
+  // The same model twice: a result, with what it means.
+  const auto same = test::run_cli("imr " + a + " " + a + " --samples 0 --json '" + (dir / "same.json").string() + "'");
+  ASSERT_EQ(same.exit_code, 0) << same.output;
+  EXPECT_NE(same.output.find("(identical models)"), std::string::npos) << same.output;
+  EXPECT_NE(same.output.find("note: all models are identical"), std::string::npos) << same.output;
+  const auto j = nlohmann::json::parse(std::ifstream(dir / "same.json"));
+  EXPECT_TRUE(j["pairs"][0]["identical_models"].get<bool>());
+  EXPECT_TRUE(j["converged"].get<bool>());
+  // Debiased, identical models are at divergence 0 and the debiased IMR is undefined, which is said.
+  const auto debiased = test::run_cli("imr " + a + " " + a + " --samples 0 --debiased");
+  ASSERT_EQ(debiased.exit_code, 0) << debiased.output;
+  EXPECT_NE(debiased.output.find("IMR (debiased): undefined"), std::string::npos) << debiased.output;
+  // One Gaussian twice: every cost is 0, so S = 0 exactly and the IMR (ln 0/0) is undefined: one line,
+  // not "cannot normalise".
+  write_gaussians_ply(dir / "one.ply", random_model(1, 7));
+  const std::string one = "'" + (dir / "one.ply").string() + "'";
+  const auto single = test::run_cli("imr " + one + " " + one);
+  EXPECT_EQ(single.exit_code, 1) << single.output;
+  EXPECT_NE(single.output.find("every pair of models is at distance 0 (identical models)"), std::string::npos)
+      << single.output;
+  EXPECT_EQ(single.output.find("cannot normalise"), std::string::npos) << single.output;
+  // Two different single Gaussians: a distance.
+  write_gaussians_ply(dir / "other.ply", random_model(1, 8));
+  const auto pair = test::run_cli("imr " + one + " '" + (dir / "other.ply").string() + "'");
+  EXPECT_EQ(pair.exit_code, 0) << pair.output;
+  EXPECT_EQ(pair.output.find("identical"), std::string::npos) << pair.output;
+}
+
 }  // namespace
 }  // namespace d2gs

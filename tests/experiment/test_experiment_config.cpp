@@ -103,6 +103,36 @@ TEST(ExperimentConfig, BadFilesAreOneLineErrorsNamingTheFile) {
   expect_error("{" + scenes + R"(, "seeds": [1, 1], "methods": [{"method": "3dgs"}]})", "'seeds' repeats");
 }
 
+// Numbers used to go through get<int>(): "views": [4294967299] became 3 views, 5.7 became 5.
+TEST(ExperimentConfig, NumbersAreTypeAndRangeChecked) {
+  const std::string scenes = R"("scenes": [{"name": "fern", "source": "/data/fern"}])";
+  const std::string methods = R"("methods": [{"method": "3dgs"}])";
+  const auto with = [&](const std::string& more) { return "{" + scenes + ", " + methods + ", " + more + "}"; };
+  expect_error(with(R"("views": [4294967299])"), "key 'views[0]': 4294967299 is out of range");
+  expect_error(with(R"("views": [3.5])"), "key 'views[0]' must be an integer, got 3.5");
+  expect_error(with(R"("views": [-1])"), "key 'views[0]': -1 is out of range");
+  expect_error(with(R"("views": 3)"), "key 'views' must be a list");
+  expect_error(with(R"("views": [3], "seeds": [0, -1])"), "key 'seeds[1]': -1 is out of range");
+  expect_error(with(R"("views": [3], "seeds": [1.5])"), "key 'seeds[0]' must be an integer");
+  expect_error(with(R"("views": [3], "checkpoint_every": 5.7)"), "key 'checkpoint_every' must be an integer");
+  expect_error(with(R"("views": [3], "checkpoint_every": 4294967296)"), "key 'checkpoint_every': 4294967296 is out of range");
+  expect_error(with(R"("views": [3], "checkpoint_every": 0)"), "key 'checkpoint_every': 0 is out of range");
+  expect_error(with(R"("views": [3], "imr": {"samples": -1})"), "key 'samples': -1 is out of range");
+  expect_error(with(R"("views": [3], "report": {"max_views": 2.5})"), "key 'max_views' must be an integer");
+  expect_error(with(R"("views": [3], "train": {"iterations": 4294967301})"),
+               "'train': key 'iterations': 4294967301 is out of range");
+  expect_error(with(R"("views": [3], "train": {"iterations": 1e400})"), "invalid JSON");
+  expect_error("{" + scenes + R"(, "views": [3], "methods": [{"method": "3dgs", "options": {"resolution": 4294967304}}]})",
+               "method 3dgs options: key 'resolution': 4294967304 is out of range");
+  // In range: taken as written.
+  const auto dir = test::scratch_dir();
+  write_file_atomic(dir / "ok.json", with(R"("views": [3, 9], "seeds": [18446744073709551615], "imr": {"samples": 0})"));
+  const ExperimentConfig c = load_experiment_config(dir / "ok.json");
+  EXPECT_EQ(c.views, (std::vector<int>{3, 9}));
+  EXPECT_EQ(c.seeds, (std::vector<std::uint64_t>{UINT64_MAX}));
+  EXPECT_EQ(c.imr_samples, 0u);
+}
+
 TEST(ExperimentConfig, InvalidRunConfigurationNamesTheRun) {
   const nlohmann::json j = {{"scenes", {{{"name", "fern"}, {"source", "/data/fern"}}}},
                             {"views", {3}},
@@ -135,6 +165,18 @@ TEST(ExperimentConfig, EveryShippedConfigLoadsAndExpands) {
     for (const auto& r : runs) EXPECT_EQ(r.train_config["iterations"], 10000) << e.path();
   }
   EXPECT_GE(files, 4u);
+}
+
+// An experiment folder under a file: refused before anything runs, naming both paths.
+TEST(ExperimentCli, OutputUnderAFileIsRefusedFirst) {
+  const auto dir = test::scratch_dir();
+  write_file_atomic(dir / "file", "x");
+  const auto config = test::source_dir() / "configs/experiments/llff_fern_3views.json";
+  const auto r = test::run_cli("experiment --config '" + config.string() + "' --data-root '" +
+                               test::shared_data().string() + "' -o '" + (dir / "file/exp").string() + "'");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find((dir / "file").string() + " is a file, not a folder"), std::string::npos) << r.output;
+  EXPECT_EQ(r.output.find("internal"), std::string::npos) << r.output;
 }
 
 }  // namespace

@@ -205,5 +205,19 @@ TEST(TrainingGeometry, InitWritesThePublishedLayoutAndTrainReusesIt) {
   EXPECT_FALSE(cfg["init_is_oracle"].get<bool>());
 }
 
+// An output folder under a file used to fail with "internal: filesystem error" after the stereo work.
+TEST(TrainingGeometry, InitOutputUnderAFileFailsBeforeTheWork) {
+  const auto dir = test::scratch_dir();
+  write_file_atomic(dir / "file", "x");
+  const auto r = test::run_cli(fmt::format("init -s '{}' --n-views 3 -r 8 -o '{}'", fern().string(),
+                                           (dir / "file/geometry").string()));
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find((dir / "file/geometry").string() + ": cannot write here: " + (dir / "file").string() +
+                          " is a file, not a folder"),
+            std::string::npos)
+      << r.output;
+  EXPECT_EQ(r.output.find("sparse points"), std::string::npos) << "the work was done first:\n" << r.output;
+}
+
 }  // namespace
 }  // namespace d2gs

@@ -54,5 +54,40 @@ TEST(RenderCli, RendersTestViewsWithDepthAndAlpha) {
   EXPECT_NE(bad.output.find("--split"), std::string::npos) << bad.output;
 }
 
+// Bad options and models fail before anything is rendered or written.
+TEST(RenderCli, RefusesShDegreeAboveTheModelsAnEmptyModelAndAnOutputUnderAFile) {
+  const auto fern = shared_data() / "nerf_llff_data/fern";
+  const auto dir = scratch_dir();
+  Gaussians model;
+  model.resize(50, 1);  // SH degree 1
+  for (std::size_t i = 0; i < model.size(); ++i) model.means[i * 3 + 2] = 5.0f;
+  write_gaussians_ply(dir / "degree1.ply", model);
+  const auto render = [&](const std::string& ply, const std::string& out, const std::string& extra) {
+    return run_cli("render --model '" + ply + "' -s '" + fern.string() + "' -r 8 -o '" + out + "' " + extra);
+  };
+  // Degree 10 used to render degree 3 silently.
+  const auto ten = render((dir / "degree1.ply").string(), (dir / "out").string(), "--sh-degree 10");
+  EXPECT_NE(ten.exit_code, 0) << ten.output;
+  EXPECT_NE(ten.output.find("--sh-degree"), std::string::npos) << ten.output;
+  const auto two = render((dir / "degree1.ply").string(), (dir / "out").string(), "--sh-degree 2");
+  EXPECT_EQ(two.exit_code, 1) << two.output;
+  EXPECT_NE(two.output.find("--sh-degree 2 is above the SH degree 1 of the model"), std::string::npos) << two.output;
+  EXPECT_FALSE(std::filesystem::exists(dir / "out"));
+  const auto one = render((dir / "degree1.ply").string(), (dir / "out").string(), "--sh-degree 1");
+  EXPECT_EQ(one.exit_code, 0) << one.output;
+  // A model without Gaussians used to render black images with exit 0.
+  write_gaussians_ply(dir / "empty.ply", Gaussians{});
+  const auto empty = render((dir / "empty.ply").string(), (dir / "empty_out").string(), "");
+  EXPECT_EQ(empty.exit_code, 1) << empty.output;
+  EXPECT_NE(empty.output.find((dir / "empty.ply").string() + ": the model has no Gaussians"), std::string::npos)
+      << empty.output;
+  EXPECT_FALSE(std::filesystem::exists(dir / "empty_out"));
+  // An output folder under a file: said before rendering, not "internal: filesystem error" after.
+  const auto under = render((dir / "degree1.ply").string(), (dir / "degree1.ply/out").string(), "");
+  EXPECT_EQ(under.exit_code, 1) << under.output;
+  EXPECT_NE(under.output.find("is a file, not a folder"), std::string::npos) << under.output;
+  EXPECT_EQ(under.output.find("internal"), std::string::npos) << under.output;
+}
+
 }  // namespace
 }  // namespace d2gs::test

@@ -270,7 +270,9 @@ TEST(Colmap, SimplePinholeAndUnsupportedModels) {
   EXPECT_EQ(colmap_model_num_params(11), 16);
 }
 
-TEST(Colmap, AspectMismatchBetweenCameraAndImagesWarns) {
+// An image whose aspect ratio differs from its camera's is another image (it was a warning, and the run
+// trained with stretched intrinsics); a uniformly resized image keeps its scaled intrinsics.
+TEST(Colmap, AspectMismatchBetweenCameraAndImageIsAnError) {
   const auto dir = test::scratch_dir();
   ColmapCamera cam;
   cam.id = 1;
@@ -280,10 +282,12 @@ TEST(Colmap, AspectMismatchBetweenCameraAndImagesWarns) {
   cam.params = {3000, 3000, 2016, 2016};
   SceneLoadOptions o;
   o.resolution = 8;
-  const Scene s = load_scene(make_fern_colmap(dir, {cam}), o);
-  ASSERT_EQ(s.warnings.size(), 1u);
-  EXPECT_NE(s.warnings[0].find("aspect"), std::string::npos);
-  EXPECT_NEAR(s.cameras[0].fy, 3000.0 * 378 / 4032, 1e-9);
+  expect_error([&] { load_scene(make_fern_colmap(dir / "a", {cam}), o); },
+               {"image000.png", "504x378", "camera 1", "4032x4032", "aspect ratios differ"});
+  cam.height = 3024;
+  const Scene s = load_scene(make_fern_colmap(dir / "b", {cam}), o);
+  EXPECT_TRUE(s.warnings.empty());
+  EXPECT_NEAR(s.cameras[0].fy, 3000.0 * 378 / 3024, 1e-9);
 }
 
 TEST(Colmap, ImagesRefersToUnknownCameraOrDuplicateName) {

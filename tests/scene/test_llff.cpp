@@ -3,6 +3,7 @@
 
 #include <cmath>
 
+#include "d2gs/core/image.hpp"
 #include "d2gs/core/npy.hpp"
 #include "d2gs/core/resize_pil.hpp"
 #include "d2gs/scene/colmap.hpp"
@@ -242,11 +243,21 @@ TEST(LlffBadInput, MissingAndCorruptImages) {
   // A missing image: one image fewer than rows.
   fs::remove(root / "images_8" / "image005.png");
   expect_error([&] { load_scene(root, res(8)); }, {"poses_bounds.npy", "20 rows", "19 images"});
-  // An image whose size changed after loading: load_image checks it.
+  // A training image of another size than its pose row: the focal length would not fit it. An error at
+  // load (it was a warning, and the run trained with wrong intrinsics).
   fs::create_symlink(test::fern_dir() / "images_4" / "image005.png", root / "images_8" / "image005.png");
-  Scene t = load_scene(root, res(8));
-  t.cameras[5].width = 504;
-  t.cameras[5].height = 378;
+  expect_error([&] { load_scene(root, res(8)); },
+               {"image005.png", "1008x756", "poses_bounds.npy row 5", "504x378 at 1/8"});
+  const auto resized = resize_area(read_image(test::fern_dir() / "images_8" / "image005.png"), 500, 375);
+  fs::remove(root / "images_8" / "image005.png");
+  write_image(root / "images_8" / "image005.png", resized);
+  expect_error([&] { load_scene(root, res(8)); }, {"image005.png", "500x375", "row 5"});
+  // An image whose size changed after loading: load_image checks it.
+  fs::remove(root / "images_8" / "image005.png");
+  fs::create_symlink(test::fern_dir() / "images_8" / "image005.png", root / "images_8" / "image005.png");
+  const Scene t = load_scene(root, res(8));
+  fs::remove(root / "images_8" / "image005.png");
+  fs::create_symlink(test::fern_dir() / "images_4" / "image005.png", root / "images_8" / "image005.png");
   expect_error([&] { load_image(t, 5); }, {"image005.png", "1008x756", "504x378"});
 }
 

@@ -134,6 +134,9 @@ TEST(Scene, RoomWithImagesNFolderUsesIt) {
 TEST(SceneBadInput, MissingFolderUnknownFormatBadOptions) {
   const auto dir = test::scratch_dir();
   expect_error([&] { load_scene(dir / "absent"); }, {(dir / "absent").string(), "not found"});
+  // -s naming a file (e.g. the poses file instead of its folder): said so, not "not found".
+  expect_error([&] { load_scene(test::fern_dir() / "poses_bounds.npy"); },
+               {(test::fern_dir() / "poses_bounds.npy").string(), "is a file, not a scene folder"});
   fs::create_directories(dir / "empty" / "sparse" / "0");
   expect_error([&] { load_scene(dir / "empty"); },
                {"unknown scene format", "sparse/0/images.bin", "poses_bounds.npy", "transforms_train.json"});

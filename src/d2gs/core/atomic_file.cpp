@@ -96,6 +96,49 @@ void write_file_atomic_with(const fs::path& path, const std::function<void(const
   rename_into_place(temporary, path);
 }
 
+namespace {
+
+// Why folder `dir` cannot be written to or created, or empty.
+std::string folder_obstacle(const fs::path& dir) {
+  if (dir.empty()) return {};  // the working folder
+  std::error_code ec;
+  const fs::path path = fs::absolute(dir, ec);
+  if (ec) return fmt::format("cannot resolve the path: {}", ec.message());
+  if (fs::exists(path, ec)) {
+    if (!fs::is_directory(path, ec)) return fmt::format("{} exists and is not a folder", path.string());
+    if (::access(path.c_str(), W_OK | X_OK) != 0)
+      return fmt::format("folder {} is not writable ({})", path.string(), std::strerror(errno));
+    return {};
+  }
+  for (fs::path a = path.parent_path();; a = a.parent_path()) {
+    if (fs::exists(a, ec)) {
+      if (!fs::is_directory(a, ec)) return fmt::format("{} is a file, not a folder", a.string());
+      if (::access(a.c_str(), W_OK | X_OK) != 0)
+        return fmt::format("folder {} is not writable ({})", a.string(), std::strerror(errno));
+      return {};
+    }
+    if (a == a.parent_path()) return {};
+  }
+}
+
+}  // namespace
+
+void check_output_folder(const fs::path& dir) {
+  std::error_code ec;
+  if (fs::exists(dir, ec) && !fs::is_directory(dir, ec)) fail_file(dir, "exists and is not a folder");
+  if (const auto why = folder_obstacle(dir); !why.empty()) fail_file(dir, "cannot write here: {}", why);
+}
+
+void check_output_file(const fs::path& file) {
+  std::error_code ec;
+  if (file.empty()) fail("an output file name is empty");
+  if (fs::is_directory(file, ec)) fail_file(file, "is a folder; expected a file name to write");
+  if (const auto why = folder_obstacle(fs::absolute(file, ec).parent_path()); !why.empty())
+    fail_file(file, "cannot write here: {}", why);
+  if (fs::exists(file, ec) && ::access(file.c_str(), W_OK) != 0)
+    fail_file(file, "is not writable: {}", std::strerror(errno));
+}
+
 std::string read_file(const fs::path& path) {
   std::error_code ec;
   if (!fs::exists(path, ec)) fail_file(path, "file not found");

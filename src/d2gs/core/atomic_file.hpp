@@ -34,6 +34,12 @@ void write_file_atomic(const std::filesystem::path& path, std::string_view bytes
 // writers choosing a format by extension still work), then renames it onto `path`.
 void write_file_atomic_with(const std::filesystem::path& path,
                             const std::function<void(const std::filesystem::path&)>& write);
+// Checks, before a command does its work, that it will be able to write its outputs: `dir` is a folder,
+// or can be created as one (its nearest existing ancestor is a writable folder, not a file). Throws
+// d2gs::Error naming `dir` and the obstacle otherwise. Creates nothing.
+void check_output_folder(const std::filesystem::path& dir);
+// The same for a file to be written: its folder is checked as above, and `file` is not a folder.
+void check_output_file(const std::filesystem::path& file);
 // Reads a whole file; throws d2gs::Error naming the file when it cannot be read.
 std::string read_file(const std::filesystem::path& path);
 

@@ -1,10 +1,18 @@
 #include "d2gs/core/image.hpp"
 
+#include <csetjmp>
+#include <cstdio>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <fstream>
+#include <string>
 #include <utility>
+
+#include <jpeglib.h>
+// jpeglib.h first: jerror.h needs its types.
+#include <jerror.h>
 
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
@@ -50,6 +58,72 @@ std::uint32_t be32(const unsigned char* p) {
   return (std::uint32_t{p[0]} << 24) | (std::uint32_t{p[1]} << 16) | (std::uint32_t{p[2]} << 8) | p[3];
 }
 
+bool is_jpeg(std::string_view bytes) {
+  return bytes.size() >= 3 && static_cast<unsigned char>(bytes[0]) == 0xFF &&
+         static_cast<unsigned char>(bytes[1]) == 0xD8 && static_cast<unsigned char>(bytes[2]) == 0xFF;
+}
+
+// libjpeg recovers from a truncated or damaged stream with a warning (grey or repeated blocks in the
+// image) that OpenCV does not pass on. The stream is decoded once more here, at 1/8 scale (every
+// entropy-coded bit is still read, little else is done), and any warning or error is fatal.
+struct JpegErrors {
+  jpeg_error_mgr mgr;
+  std::jmp_buf jump;
+  std::string first_message;
+};
+
+void jpeg_on_error(j_common_ptr info) {
+  auto* e = reinterpret_cast<JpegErrors*>(info->err);
+  if (e->first_message.empty()) {
+    char text[JMSG_LENGTH_MAX] = {};
+    (*info->err->format_message)(info, text);
+    e->first_message = text;
+  }
+  std::longjmp(e->jump, 1);
+}
+
+void jpeg_on_message(j_common_ptr info, int level) {
+  if (level >= 0) return;  // trace messages
+  // Warnings that leave every pixel intact (stray bytes between segments, an unknown JFIF revision or
+  // Adobe transform) pass; the others mean missing or damaged image data.
+  const int code = info->err->msg_code;
+  if (code == JWRN_EXTRANEOUS_DATA || code == JWRN_JFIF_MAJOR || code == JWRN_ADOBE_XFORM) return;
+  jpeg_on_error(info);
+}
+
+// Reads the whole stream: header, every scan, the end marker. libjpeg's errors leave through longjmp.
+void jpeg_read_everything(jpeg_decompress_struct& info, std::string_view bytes) {
+  jpeg_create_decompress(&info);
+  jpeg_mem_src(&info, reinterpret_cast<const unsigned char*>(bytes.data()), static_cast<unsigned long>(bytes.size()));
+  jpeg_read_header(&info, TRUE);
+  info.scale_num = 1;
+  info.scale_denom = 8;
+  info.dct_method = JDCT_IFAST;
+  info.do_fancy_upsampling = FALSE;
+  jpeg_start_decompress(&info);
+  JSAMPARRAY row = (*info.mem->alloc_sarray)(reinterpret_cast<j_common_ptr>(&info), JPOOL_IMAGE,
+                                             info.output_width * static_cast<JDIMENSION>(info.output_components), 1);
+  while (info.output_scanline < info.output_height) jpeg_read_scanlines(&info, row, 1);
+  jpeg_finish_decompress(&info);
+}
+
+// Empty when the stream decodes cleanly, else libjpeg's first complaint. Only these two objects, whose
+// addresses libjpeg holds, live across setjmp; no C++ object with a destructor is skipped by longjmp.
+std::string jpeg_problem(std::string_view bytes) {
+  jpeg_decompress_struct info{};
+  JpegErrors errors{};
+  info.err = jpeg_std_error(&errors.mgr);
+  errors.mgr.error_exit = jpeg_on_error;
+  errors.mgr.emit_message = jpeg_on_message;
+  if (setjmp(errors.jump)) {
+    jpeg_destroy_decompress(&info);
+    return errors.first_message.empty() ? std::string("undecodable JPEG data") : errors.first_message;
+  }
+  jpeg_read_everything(info, bytes);
+  jpeg_destroy_decompress(&info);
+  return {};
+}
+
 ImageReadObserver& image_read_observer() {
   static ImageReadObserver observer;
   return observer;
@@ -63,14 +137,25 @@ Image read_image(const fs::path& path) {
   if (image_read_observer()) image_read_observer()(path);
   std::error_code ec;
   if (!fs::exists(path, ec)) fail_file(path, "image not found");
+  return decode_image(read_file(path), path);
+}
+
+Image decode_image(std::string_view bytes, const fs::path& source) {
+  if (bytes.empty()) fail_file(source, "cannot decode image (empty file)");
+  if (is_jpeg(bytes)) {
+    const std::string problem = jpeg_problem(bytes);
+    if (!problem.empty()) fail_file(source, "corrupt or truncated JPEG ({})", problem);
+  }
   cv::Mat m;
   try {
-    m = cv::imread(path.string(), cv::IMREAD_UNCHANGED);
+    const cv::Mat buffer(1, static_cast<int>(std::min<std::size_t>(bytes.size(), INT32_MAX)), CV_8U,
+                         const_cast<char*>(bytes.data()));
+    m = cv::imdecode(buffer, cv::IMREAD_UNCHANGED);
   } catch (const cv::Exception& e) {
-    fail_file(path, "cannot decode image ({})", e.err);
+    fail_file(source, "cannot decode image ({})", e.err);
   }
-  if (m.empty()) fail_file(path, "cannot decode image (corrupt or unsupported format)");
-  return from_mat(m, path);
+  if (m.empty()) fail_file(source, "cannot decode image (corrupt or unsupported format)");
+  return from_mat(m, source);
 }
 
 ImageSize read_image_size(const fs::path& path) {

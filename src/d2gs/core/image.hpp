@@ -4,6 +4,7 @@
 #include <cstddef>
 #include <filesystem>
 #include <functional>
+#include <string_view>
 #include <vector>
 
 namespace d2gs {
@@ -35,8 +36,12 @@ struct ImageSize {
 using ImageReadObserver = std::function<void(const std::filesystem::path&)>;
 void set_image_read_observer(ImageReadObserver observer);
 
-// Decodes an image file to float [0,1] RGB or RGBA (8- and 16-bit sources). Errors name the file.
+// Decodes an image file to float [0,1] RGB or RGBA (8- and 16-bit sources). Errors name the file. A
+// truncated or corrupt file is an error, never a partly grey image: PNG by its checksums, JPEG by a
+// check that libjpeg reads the whole stream without a warning.
 Image read_image(const std::filesystem::path& path);
+// The same from the bytes of a file; `source` names it in errors.
+Image decode_image(std::string_view bytes, const std::filesystem::path& source);
 // Reads only the header of a PNG or JPEG file (falls back to decoding other formats).
 ImageSize read_image_size(const std::filesystem::path& path);
 // Area (box-average) resampling to the given size, as OpenCV's INTER_AREA.

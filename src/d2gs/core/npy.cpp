@@ -105,6 +105,12 @@ NpyArray parse_npy(std::string_view bytes, const std::filesystem::path& src) {
   const bool swap = (endian == '>' && little_host) || (endian == '<' && !little_host);
   if (endian != '<' && endian != '>' && endian != '|' && endian != '=')
     fail_file(src, "npy dtype {} is not supported", descr);
+  // Every supported dtype has a width of 1, 2, 4 or 8 bytes; checked before the size arithmetic, where a
+  // zero width ('|u0', found by fuzz_npy) made any element count look present in zero bytes.
+  const bool supported = (kind == 'f' && (width == 4 || width == 8)) ||
+                         ((kind == 'i' || kind == 'u') && (width == 1 || width == 2 || width == 4 || width == 8)) ||
+                         (kind == 'b' && width == 1);
+  if (!supported) fail_file(src, "npy dtype {} is not supported", descr);
 
   std::size_t count = 1;
   for (auto d : shape) {

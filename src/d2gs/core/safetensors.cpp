@@ -51,7 +51,7 @@ TensorFile parse_safetensors(std::string_view bytes, const std::filesystem::path
   nlohmann::json j;
   try {
     j = nlohmann::json::parse(header);
-  } catch (const nlohmann::json::parse_error&) {
+  } catch (const nlohmann::json::exception&) {  // parse_error, or out_of_range for a number like 1e400
     fail_file(source, "not a safetensors file (the header is not JSON)");
   }
   if (!j.is_object()) fail_file(source, "safetensors header is not a JSON object");

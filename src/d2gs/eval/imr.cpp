@@ -168,10 +168,16 @@ MixtureCost::MixtureCost(const GaussianMixture& source, const GaussianMixture& t
     double total = 0.0;
     for (const double v : row_stat) total += v;
     const double mean = total / (static_cast<double>(n_) * static_cast<double>(m_));
-    if (!(mean > 0.0) || !std::isfinite(mean))
-      fail("IMR cost: the mean cost is {} (identical single points?); cannot normalise", mean);
-    scale_ = mean;
-    inv_scale_ = 1.0 / mean;
+    if (mean == 0.0 && options.clamp_shape) {
+      // Every entry is 0 (entries are ≥ 0 when clamped): the mixtures coincide point for point (e.g. the
+      // same single Gaussian twice). S = 0 whatever the plan; there is nothing to normalise.
+    } else if (!(mean > 0.0) || !std::isfinite(mean)) {
+      fail("IMR cost: the mean cost is {}{}; cannot normalise by it (try --no-normalize)", mean,
+           options.clamp_shape ? "" : " (without the clamp the shape term may be negative)");
+    } else {
+      scale_ = mean;
+      inv_scale_ = 1.0 / mean;
+    }
   }
 }
 
@@ -261,6 +267,8 @@ double imr_from_distances(const std::vector<double>& distances) {
     squares += d * d;
     sum += d;
   }
+  if (sum == 0.0)
+    fail("IMR: every pair of models is at distance 0 (identical models): ln(Σd²/Σd) is undefined");
   if (!(sum > 0.0)) fail("IMR: the distances sum to {}, the logarithm is undefined", sum);
   return std::log(squares / sum);
 }

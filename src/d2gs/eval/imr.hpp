@@ -44,7 +44,7 @@ public:
   CostSpan column(std::size_t j, double* scratch) const override;
   // C̃_ij (normalised when options.normalize), in double.
   double entry(std::size_t i, std::size_t j) const;
-  double scale() const { return scale_; }                        // mean of the clamped cost (1 if not normalising)
+  double scale() const { return scale_; }  // mean of the clamped cost (1 if not normalising, or if every cost is 0)
   double max_position_term() const { return max_position_; }     // max_ij ‖m_i − m_j‖²
 
 private:

@@ -59,7 +59,7 @@ void group_imr(GroupRow& row, const std::vector<const RunSpec*>& members, const 
   if (fs::is_regular_file(cache)) {
     try {
       const auto j = nlohmann::json::parse(read_file(cache));
-      if (j.at("models") == identity && j.at("samples").get<std::size_t>() == config.imr_samples &&
+      if (j.at("models") == identity && j.at("samples") == nlohmann::json(config.imr_samples) &&
           j.at("solver") == solver) {
         row.imr = j.at("imr").get<double>();
         note_unconverged(j.at("pairs"));

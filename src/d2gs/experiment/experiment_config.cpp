@@ -1,12 +1,15 @@
 #include "d2gs/experiment/experiment_config.hpp"
 
 #include <algorithm>
+#include <limits>
 #include <set>
+#include <type_traits>
 
 #include <fmt/format.h>
 
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
+#include "d2gs/core/json_value.hpp"
 #include "d2gs/train/config.hpp"
 #include "d2gs/train/presets.hpp"
 
@@ -26,13 +29,15 @@ bool safe_name(const std::string& s) {
 
 // Keys the experiment sets itself for every run.
 constexpr const char* kReservedKeys[] = {"source", "model_dir", "n_views", "seed", "method", "checkpoint_iterations",
-                                         "init_is_oracle", "scene_extent", "split"};
+                                         "init_is_oracle", "scene_extent", "split", "images_folder"};
 
 void check_keys(const nlohmann::json& j, std::initializer_list<const char*> allowed, const fs::path& file,
                 const std::string& where) {
-  for (const auto& [key, value] : j.items())
+  for (const auto& item : j.items()) {
+    const std::string& key = item.key();  // (clang 14 cannot capture a structured binding in a lambda)
     if (std::find_if(allowed.begin(), allowed.end(), [&](const char* a) { return key == a; }) == allowed.end())
       fail_file(file, "unknown key '{}' in {}", key, where);
+  }
 }
 
 void check_train_keys(const nlohmann::json& j, const fs::path& file, const std::string& where) {
@@ -51,10 +56,31 @@ void check_train_keys(const nlohmann::json& j, const fs::path& file, const std::
 template <typename T>
 T get(const nlohmann::json& j, const char* key, const T& fallback, const fs::path& file, const std::string& where) {
   if (!j.contains(key)) return fallback;
+  const nlohmann::json& v = j.at(key);
+  const bool ok = std::is_same_v<T, bool> ? v.is_boolean() : v.is_string();
+  if (!ok) fail_file(file, "{}: key '{}' has the wrong type (expected {})", where, key, std::is_same_v<T, bool> ? "true or false" : "a string");
+  return v.get<T>();
+}
+
+// A number (or a list of numbers) of the experiment file, type- and range-checked (json_value.hpp).
+template <typename T>
+T number(const nlohmann::json& j, const char* key, T fallback, T min, T max, const fs::path& file,
+         const std::string& where) {
+  if (!j.contains(key)) return fallback;
   try {
-    return j.at(key).get<T>();
-  } catch (const nlohmann::json::exception&) {
-    fail_file(file, "{}: key '{}' has the wrong type", where, key);
+    return json_number<T>(j.at(key), key, min, max);
+  } catch (const Error& e) {
+    fail_file(file, "{}: {}", where, e.what());
+  }
+}
+template <typename T>
+std::vector<T> number_list(const nlohmann::json& j, const char* key, T min, T max, const fs::path& file,
+                           const std::string& where) {
+  if (!j.contains(key)) return {};
+  try {
+    return json_number_list<T>(j.at(key), key, min, max);
+  } catch (const Error& e) {
+    fail_file(file, "{}: {}", where, e.what());
   }
 }
 
@@ -63,13 +89,7 @@ T get(const nlohmann::json& j, const char* key, const T& fallback, const fs::pat
 std::string RunSpec::id() const { return fmt::format("{}__{}v__{}__seed{}", scene, views, label, seed); }
 
 ExperimentConfig load_experiment_config(const fs::path& file, const std::string& data_root_override) {
-  nlohmann::json j;
-  try {
-    j = nlohmann::json::parse(read_file(file));
-  } catch (const nlohmann::json::parse_error& e) {
-    fail_file(file, "invalid JSON ({})", e.what());
-  }
-  return parse_experiment_config(j, file, data_root_override);
+  return parse_experiment_config(read_json_file(file), file, data_root_override);
 }
 
 ExperimentConfig parse_experiment_config(const nlohmann::json& j, const fs::path& file,
@@ -103,12 +123,11 @@ ExperimentConfig parse_experiment_config(const nlohmann::json& j, const fs::path
     spec.source = fs::absolute(src).lexically_normal().string();
     c.scenes.push_back(spec);
   }
-  c.views = get<std::vector<int>>(j, "views", {}, file, top);
+  c.views = number_list<int>(j, "views", 0, std::numeric_limits<int>::max(), file, top);
   if (c.views.empty()) fail_file(file, "'views' must list at least one view count (0 = all non-test views)");
-  for (int v : c.views)
-    if (v < 0) fail_file(file, "view count {} is negative", v);
   if (std::set<int>(c.views.begin(), c.views.end()).size() != c.views.size()) fail_file(file, "'views' repeats a value");
-  c.seeds = get<std::vector<std::uint64_t>>(j, "seeds", {0}, file, top);
+  c.seeds = j.contains("seeds") ? number_list<std::uint64_t>(j, "seeds", 0, std::numeric_limits<std::uint64_t>::max(), file, top)
+                                : std::vector<std::uint64_t>{0};
   if (c.seeds.empty()) fail_file(file, "'seeds' must list at least one seed");
   if (std::set<std::uint64_t>(c.seeds.begin(), c.seeds.end()).size() != c.seeds.size())
     fail_file(file, "'seeds' repeats a value");
@@ -144,21 +163,20 @@ ExperimentConfig parse_experiment_config(const nlohmann::json& j, const fs::path
     check_train_keys(spec.options, file, where + " options");
     c.methods.push_back(spec);
   }
-  c.checkpoint_every = get<int>(j, "checkpoint_every", 1000, file, top);
-  if (c.checkpoint_every <= 0) fail_file(file, "'checkpoint_every' must be positive");
+  c.checkpoint_every = number<int>(j, "checkpoint_every", 1000, 1, std::numeric_limits<int>::max(), file, top);
   c.keep_checkpoints = get<bool>(j, "keep_checkpoints", false, file, top);
   if (j.contains("imr")) {
     const auto& imr = j["imr"];
     if (!imr.is_object()) fail_file(file, "'imr' must be an object");
     check_keys(imr, {"enabled", "samples"}, file, "'imr'");
     c.imr_enabled = get<bool>(imr, "enabled", true, file, "'imr'");
-    c.imr_samples = get<std::size_t>(imr, "samples", 10000, file, "'imr'");
+    c.imr_samples = number<std::size_t>(imr, "samples", 10000, 0, std::numeric_limits<std::size_t>::max(), file, "'imr'");
   }
   if (j.contains("report")) {
     const auto& r = j["report"];
     if (!r.is_object()) fail_file(file, "'report' must be an object");
     check_keys(r, {"max_views"}, file, "'report'");
-    c.report_max_views = get<int>(r, "max_views", -1, file, "'report'");
+    c.report_max_views = number<int>(r, "max_views", -1, -1, std::numeric_limits<int>::max(), file, "'report'");
   }
   return c;
 }

@@ -19,6 +19,7 @@
 
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
+#include "d2gs/core/json_value.hpp"
 #include "d2gs/core/log.hpp"
 
 extern char** environ;
@@ -273,12 +274,7 @@ std::pair<ExperimentConfig, std::vector<RunSpec>> read_experiment_state(const fs
   const fs::path file = out_dir / "experiment.json";
   if (!fs::is_regular_file(file))
     fail_file(out_dir, "holds no experiment.json (run `d2gs experiment --config EXP.json -o DIR` first)");
-  nlohmann::json state;
-  try {
-    state = nlohmann::json::parse(read_file(file));
-  } catch (const nlohmann::json::parse_error& e) {
-    fail_file(file, "invalid JSON ({})", e.what());
-  }
+  const nlohmann::json state = read_json_file(file);
   if (!state.is_object() || state.value("format", "") != "d2gs-experiment-1" || !state.contains("config"))
     fail_file(file, "not a d2gs experiment state file");
   ExperimentConfig config = parse_experiment_config(state["config"], file);

@@ -10,6 +10,7 @@
 
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
+#include "d2gs/core/json_value.hpp"
 #include "d2gs/report/run_data.hpp"
 
 namespace d2gs::experiment {
@@ -62,12 +63,7 @@ std::vector<GroupRow> summarize(const std::vector<RunSpec>& runs, const fs::path
     ++row.runs_total;
     const fs::path results = out_dir / run.dir / "results.json";
     if (!fs::is_regular_file(results)) continue;
-    nlohmann::json j;
-    try {
-      j = nlohmann::json::parse(read_file(results));
-    } catch (const nlohmann::json::parse_error& e) {
-      fail_file(results, "invalid JSON ({})", e.what());
-    }
+    const nlohmann::json j = read_json_file(results);
     ++row.runs_finished;
     auto& v = values[it->second];
     for (const auto& [name, value] : report::mean_metrics(j)) v[name].push_back(value);

@@ -337,30 +337,30 @@ std::optional<CachedTrainingGeometry> find_training_geometry(const fs::path& dir
                                                              const TrainingGeometryOptions& options) {
   std::error_code ec;
   if (!fs::is_regular_file(dir / "init.json", ec)) return std::nullopt;
-  nlohmann::json m;
   try {
-    m = nlohmann::json::parse(read_file(dir / "init.json"));
-  } catch (const nlohmann::json::exception&) {
+    const nlohmann::json m = nlohmann::json::parse(read_file(dir / "init.json"));
+    nlohmann::json names = nlohmann::json::array();
+    for (int v : views) names.push_back(scene.cameras[static_cast<std::size_t>(v)].image_name);
+    if (m.value("format", "") != "d2gs-training-geometry-1" || m.value("views", nlohmann::json()) != nlohmann::json(views) ||
+        m.value("image_names", nlohmann::json()) != names ||
+        m.value("resolution", nlohmann::json()) != nlohmann::json(scene.resolution) ||
+        m.value("options", "") != options_key(options))
+      return std::nullopt;
+    CachedTrainingGeometry c;
+    c.dir = dir;
+    c.sparse_ply = dir / m.value("sparse", "sparse/points3D.ply");
+    c.has_dense = !m.value("dense", "").empty();
+    if (c.has_dense) {
+      c.dense_ply = dir / m.value("dense", "");
+      c.depth_dir = dir / m.value("depth_dir", "depth");
+    }
+    if (!fs::is_regular_file(c.sparse_ply, ec) || (c.has_dense && !fs::is_regular_file(c.dense_ply, ec)))
+      return std::nullopt;
+    return c;
+  } catch (const nlohmann::json::exception&) {  // not JSON, or a key of another type
     spdlog::warn("{}: unreadable manifest, ignored", (dir / "init.json").string());
     return std::nullopt;
   }
-  nlohmann::json names = nlohmann::json::array();
-  for (int v : views) names.push_back(scene.cameras[static_cast<std::size_t>(v)].image_name);
-  if (m.value("format", "") != "d2gs-training-geometry-1" || m.value("views", nlohmann::json()) != nlohmann::json(views) ||
-      m.value("image_names", nlohmann::json()) != names || m.value("resolution", 0) != scene.resolution ||
-      m.value("options", "") != options_key(options))
-    return std::nullopt;
-  CachedTrainingGeometry c;
-  c.dir = dir;
-  c.sparse_ply = dir / m.value("sparse", "sparse/points3D.ply");
-  c.has_dense = !m.value("dense", "").empty();
-  if (c.has_dense) {
-    c.dense_ply = dir / m.value("dense", "");
-    c.depth_dir = dir / m.value("depth_dir", "depth");
-  }
-  if (!fs::is_regular_file(c.sparse_ply, ec) || (c.has_dense && !fs::is_regular_file(c.dense_ply, ec)))
-    return std::nullopt;
-  return c;
 }
 
 CachedTrainingGeometry obtain_training_geometry(const Scene& scene, const std::vector<int>& views,

@@ -10,20 +10,13 @@
 
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
+#include "d2gs/core/json_value.hpp"
 #include "d2gs/model/ply.hpp"
 
 namespace d2gs::report {
 namespace fs = std::filesystem;
 
 namespace {
-
-nlohmann::json read_json(const fs::path& path) {
-  try {
-    return nlohmann::json::parse(read_file(path));
-  } catch (const nlohmann::json::exception& e) {
-    fail_file(path, "invalid JSON ({})", e.what());
-  }
-}
 
 std::string upper(std::string s) {
   for (char& c : s) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
@@ -151,7 +144,7 @@ LayerCounts count_layers(const Gaussians& model, const ReferenceCamera& camera, 
 std::optional<ReferenceCamera> reference_camera(const fs::path& dir, const nlohmann::json& config) {
   const fs::path path = dir / "cameras.json";
   if (!fs::is_regular_file(path)) return std::nullopt;
-  const nlohmann::json cams = read_json(path);
+  const nlohmann::json cams = read_json_file(path);
   if (!cams.is_array() || cams.empty()) fail_file(path, "expected a non-empty array of cameras");
   std::vector<int> test;
   if (config.is_object() && config.contains("split") && config["split"].contains("test"))
@@ -190,8 +183,8 @@ RunData load_run(const fs::path& dir, const RunLoadOptions& options) {
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) fail_file(dir, "no such run folder");
   if (!fs::is_regular_file(dir / "config.json")) fail_file(dir, "not a run folder (no config.json)");
-  r.config = read_json(dir / "config.json");
-  if (fs::is_regular_file(dir / "results.json")) r.results = read_json(dir / "results.json");
+  r.config = read_json_file(dir / "config.json");
+  if (fs::is_regular_file(dir / "results.json")) r.results = read_json_file(dir / "results.json");
   if (fs::is_regular_file(dir / "train_log.jsonl")) r.log = read_train_log(dir / "train_log.jsonl");
 
   const std::regex iteration_re("iteration_([0-9]{1,9})");

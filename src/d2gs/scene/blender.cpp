@@ -119,6 +119,11 @@ Scene load_blender_scene(const fs::path& root, const SceneLoadOptions& options) 
       cam.image_path = frame_image_path(root, frame.file_path);
       cam.image_name = fs::path(frame.file_path).filename().string();
       if (!fs::is_regular_file(cam.image_path, ec)) {
+        // Test frames without an image are skipped (lego ships every 8th test image only); a train frame
+        // without one would silently move the split, which is computed over the train frames.
+        if (std::string_view(split) == "train")
+          fail_file(json_path, "train frame {} ({}) has no image file {}: every train frame needs its image",
+                    &frame - transforms.frames.data(), frame.file_path, cam.image_path.string());
         if (missing++ == 0) first_missing = cam.image_path.string();
         continue;
       }
@@ -141,7 +146,7 @@ Scene load_blender_scene(const fs::path& root, const SceneLoadOptions& options) 
       scene.warnings.push_back(msg);
     }
   }
-  if (scene.dataset_train.empty()) fail_file(root / "transforms_train.json", "no train frame has an image file");
+  if (scene.dataset_train.empty()) fail_file(root / "transforms_train.json", "lists no train frame");
   for (std::size_t i = 0; i < folders.size(); ++i) {
     if (i) scene.images_folder += ", ";
     scene.images_folder += folders[i];

@@ -582,7 +582,6 @@ Scene load_colmap_scene(const fs::path& root, const SceneLoadOptions& options) {
   const auto folder = choose_image_folder(root, options.resolution, options.image_source);
   scene.images_folder = folder.folder;
   scene.cameras.reserve(images.size());
-  bool warned_aspect = false;
   for (const auto& im : images) {
     const auto it = by_id.find(im.camera_id);
     if (it == by_id.end())
@@ -606,14 +605,10 @@ Scene load_colmap_scene(const fs::path& root, const SceneLoadOptions& options) {
     } else {  // SIMPLE_PINHOLE, SIMPLE_RADIAL: f cx cy [k]
       fx = fy = c.params[0], cx = c.params[1], cy = c.params[2];
     }
-    if (!warned_aspect && std::abs(sx / sy - 1.0) > 0.02) {
-      warned_aspect = true;
-      const auto msg = fmt::format("{}: image is {}x{} but camera {} in {} is {}x{}: the aspect ratios differ",
-                                   cam.image_path.string(), cam.width, cam.height, c.id,
-                                   cameras_path.filename().string(), c.width, c.height);
-      spdlog::warn("{}", msg);
-      scene.warnings.push_back(msg);
-    }
+    // The intrinsics follow a uniformly resized image; a different aspect ratio is another image.
+    if (std::abs(sx / sy - 1.0) > 0.02)
+      fail_file(cam.image_path, "image is {}x{} but camera {} in {} is {}x{}: the aspect ratios differ (wrong image?)",
+                cam.width, cam.height, c.id, cameras_path.filename().string(), c.width, c.height);
     cam.fx = fx * sx;
     cam.fy = fy * sy;
     cam.cx = cx * sx;

@@ -97,7 +97,6 @@ Scene load_llff_scene(const fs::path& root, const SceneLoadOptions& options) {
               (root / folder.folder).string(), names.size());
 
   const double r = options.resolution;
-  bool warned_size = false;
   for (std::size_t k = 0; k < poses.size(); ++k) {
     const auto& p = poses[k];
     Camera cam;
@@ -111,16 +110,13 @@ Scene load_llff_scene(const fs::path& root, const SceneLoadOptions& options) {
     cam.cy = 0.5 * cam.height;
     cam.R_world_to_cam = p.R_world_to_cam;
     cam.t_world_to_cam = -(p.R_world_to_cam * p.center);
-    if (!warned_size && (std::abs(cam.width - p.width / r) > 1.0 || std::abs(cam.height - p.height / r) > 1.0)) {
-      warned_size = true;
-      const auto msg = fmt::format(
-          "{}: image is {}x{} but poses_bounds.npy row {} gives {}x{} at full resolution ({}x{} at 1/{}); "
-          "the focal length assumes 1/{}",
-          cam.image_path.string(), cam.width, cam.height, k, p.width, p.height, p.width / r, p.height / r,
-          options.resolution, options.resolution);
-      spdlog::warn("{}", msg);
-      scene.warnings.push_back(msg);
-    }
+    // The focal length is the poses' at 1/R: an image of another size would be trained with wrong intrinsics.
+    if (std::abs(cam.width - p.width / r) > 1.0 || std::abs(cam.height - p.height / r) > 1.0)
+      fail_file(cam.image_path,
+                "image is {}x{} at -r {}, but poses_bounds.npy row {} gives {}x{} at full resolution, i.e. {}x{} at 1/{} "
+                "(every image of the scene must have the size of its pose row)",
+                cam.width, cam.height, options.resolution, k, p.width, p.height, p.width / r, p.height / r,
+                options.resolution);
     scene.cameras.push_back(std::move(cam));
   }
 

@@ -102,7 +102,13 @@ Scene load_scene(const fs::path& root, const SceneLoadOptions& options) {
   for (int c = 0; c < 3; ++c)
     if (!std::isfinite(options.background[c]) || options.background[c] < 0 || options.background[c] > 1)
       fail("background colour components must lie in [0, 1]");
-  if (!is_dir(root)) fail_file(root, "scene folder not found");
+  if (!is_dir(root)) {
+    std::error_code ec;
+    if (fs::exists(root, ec))
+      fail_file(root, "is a file, not a scene folder (-s takes the folder that holds sparse/0, poses_bounds.npy or "
+                      "transforms_train.json)");
+    fail_file(root, "scene folder not found");
+  }
   const fs::path sparse = root / "sparse" / "0";
   if (is_file(sparse / "images.bin") || is_file(sparse / "images.txt")) return load_colmap_scene(root, options);
   if (is_file(root / "poses_bounds.npy")) return load_llff_scene(root, options);

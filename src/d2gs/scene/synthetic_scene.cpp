@@ -682,7 +682,7 @@ void remove_stale_files(const fs::path& dir, int views) {
 
 bool is_synthetic_scene(const fs::path& dir) {
   const auto j = read_scene_json(dir);
-  return j.is_object() && j.value("generator", std::string()) == kSyntheticSceneGenerator;
+  return j.is_object() && j.contains("generator") && j["generator"] == kSyntheticSceneGenerator;
 }
 
 void write_synthetic_scene(const fs::path& dir, const SyntheticSceneOptions& options,

@@ -1,11 +1,16 @@
 #include "d2gs/train/config.hpp"
 
 #include <algorithm>
+#include <filesystem>
 #include <set>
+#include <string>
+#include <type_traits>
 
 #include <nlohmann/json.hpp>
 
+#include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
+#include "d2gs/core/json_value.hpp"
 
 namespace d2gs {
 
@@ -38,7 +43,18 @@ E enum_from(const std::string& s, std::initializer_list<std::pair<const char*, E
     if (s == name) return value;
   std::string list;
   for (const auto& [name, value] : names) list += std::string(list.empty() ? "" : ", ") + name;
-  fail("config: {} '{}' is not one of {}", key, s, list);
+  fail("key '{}': '{}' is not one of {}", key, s, list);
+}
+
+// One key of a config into its field, type- and range-checked: integers must be JSON integers that fit
+// the field (never truncated or wrapped), floating values finite and within the field's type. The
+// options' own ranges are TrainConfig::validate()'s, shared with the command line.
+template <typename T>
+void read(const nlohmann::json& k, const char* key, T& field) {
+  const nlohmann::json& v = k.at(key);
+  if constexpr (std::is_same_v<T, bool> || std::is_same_v<T, std::string>) field = v.get<T>();
+  else if constexpr (std::is_arithmetic_v<T>) field = json_number<T>(v, key);
+  else field = json_number_list<typename T::value_type>(v, key);
 }
 
 }  // namespace
@@ -78,6 +94,14 @@ void TrainConfig::validate() const {
     fail("option --dafe-tau must be a fraction in [0, 1] for the threshold rule (got {})", dafe_tau);
   if (!(dafe_lambda >= 0)) fail("option --dafe-lambda must be ≥ 0");
   positive(random_points, "--random-points");
+  if (init != "dense" && init != "sparse" && init != "random" && init != "sfm-all-views") {
+    std::error_code ec;
+    if (init.empty() || !std::filesystem::exists(init, ec))
+      fail("option --init '{}' is not one of dense, sparse, random, sfm-all-views, and no such PLY file exists", init);
+    if (std::filesystem::is_directory(init, ec))
+      fail("option --init '{}' is a folder; expected dense, sparse, random, sfm-all-views or a PLY file", init);
+  }
+  check_output_folder(model_dir);  // a -m under a file fails here, before any work
   positive(log_every, "--log-every");
   for (int it : save_iterations)
     if (it < 1 || it > iterations) fail("save iteration {} is outside 1..{}", it, iterations);
@@ -93,6 +117,14 @@ SceneLoadOptions scene_load_options(const TrainConfig& c) {
   lo.background = c.white_background ? glm::vec3(1.0f) : glm::vec3(0.0f);
   lo.image_source = c.image_source;
   return lo;
+}
+
+std::filesystem::path recorded_source(const std::filesystem::path& model_dir, const std::string& source) {
+  const std::filesystem::path p = source;
+  if (p.empty() || p.is_absolute()) return p;
+  std::error_code ec;
+  if (std::filesystem::is_directory(model_dir / p, ec)) return (model_dir / p).lexically_normal();
+  return p;
 }
 
 void to_json(nlohmann::json& j, const TrainConfig& c) {
@@ -126,83 +158,83 @@ void to_json(nlohmann::json& j, const TrainConfig& c) {
 }
 
 void update_from_json(TrainConfig& c, const nlohmann::json& j) {
-  if (!j.is_object()) fail("config: expected a JSON object");
+  if (!j.is_object()) fail("expected a JSON object of options, got {}", j.type_name());
   // Round-trip through to_json to know every key and its type.
   nlohmann::json known;
   to_json(known, c);
   for (const auto& [key, value] : j.items()) {
-    if (!known.contains(key)) fail("config: unknown key '{}'", key);
+    if (!known.contains(key)) fail("unknown key '{}'", key);
     const auto& ref = known[key];
     const bool ok = (ref.is_number() && value.is_number()) || (ref.is_boolean() && value.is_boolean()) ||
                     (ref.is_string() && value.is_string()) || (ref.is_array() && value.is_array());
-    if (!ok) fail("config: key '{}' has the wrong type (expected {})", key, ref.type_name());
+    if (!ok) fail("key '{}' has the wrong type (expected {}, got {})", key, ref.type_name(), value.type_name());
     known[key] = value;
   }
   try {
     const auto& k = known;
-    c.source = k["source"];
-    c.model_dir = k["model_dir"];
-    c.resolution = k["resolution"];
-    c.n_views = k["n_views"];
-    c.train_views = k["train_views"].get<std::vector<int>>();
-    c.test_views = k["test_views"].get<std::vector<int>>();
-    c.white_background = k["white_background"];
+    read(k, "source", c.source);
+    read(k, "model_dir", c.model_dir);
+    read(k, "resolution", c.resolution);
+    read(k, "n_views", c.n_views);
+    read(k, "train_views", c.train_views);
+    read(k, "test_views", c.test_views);
+    read(k, "white_background", c.white_background);
     c.image_source = enum_from<ImageSource>(k["image_source"], {{"folder", ImageSource::Folder}, {"largest", ImageSource::Largest}}, "image_source");
     c.method = method_from_string(k["method"]);
-    c.iterations = k["iterations"];
-    c.seed = k["seed"];
-    c.init = k["init"];
-    c.random_points = k["random_points"];
-    c.lr.means = k["position_lr"];
-    c.position_lr_final = k["position_lr_final"];
-    c.lr.sh_dc = k["sh_dc_lr"];
-    c.lr.sh_rest = k["sh_rest_lr"];
-    c.lr.opacity = k["opacity_lr"];
-    c.lr.scales = k["scaling_lr"];
-    c.lr.quats = k["rotation_lr"];
-    c.lambda_dssim = k["lambda_dssim"];
+    read(k, "iterations", c.iterations);
+    read(k, "seed", c.seed);
+    read(k, "init", c.init);
+    read(k, "random_points", c.random_points);
+    read(k, "position_lr", c.lr.means);
+    read(k, "position_lr_final", c.position_lr_final);
+    read(k, "sh_dc_lr", c.lr.sh_dc);
+    read(k, "sh_rest_lr", c.lr.sh_rest);
+    read(k, "opacity_lr", c.lr.opacity);
+    read(k, "scaling_lr", c.lr.scales);
+    read(k, "rotation_lr", c.lr.quats);
+    read(k, "lambda_dssim", c.lambda_dssim);
     c.alpha_clamp_pass_through = enum_from<bool>(k["alpha_clamp_grad"], {{"exact", false}, {"pass-through", true}}, "alpha_clamp_grad");
-    c.sh_degree = k["sh_degree"];
-    c.sh_increase_every = k["sh_increase_every"];
-    c.densify.grad_threshold = k["densify_grad_threshold"];
-    c.densify.percent_dense = k["percent_dense"];
-    c.densify.min_opacity = k["min_opacity"];
-    c.densify_from = k["densify_from"];
-    c.densify_until = k["densify_until"];
-    c.densify_every = k["densify_every"];
-    c.opacity_reset_at = k["opacity_reset_at"].get<std::vector<int>>();
-    c.dropgaussian_max_rate = k["dropgaussian_max_rate"];
-    c.preset = k["preset"];
-    c.scene_preset = k["scene_preset"];
-    c.dd_drop.weight_depth = k["dd_weight_depth"];
-    c.dd_drop.weight_density = k["dd_weight_density"];
-    c.dd_drop.rate_min = k["dd_rate_min"];
-    c.dd_drop.rate_max = k["dd_rate_max"];
-    c.dd_drop.rate_iterations = k["dd_rate_iterations"];
-    c.dd_drop.use_depth_score = k["dd_use_depth_score"];
-    c.dd_drop.use_density_score = k["dd_use_density_score"];
-    c.dd_drop.use_layers = k["dd_use_layers"];
-    c.dd_drop.compensate = k["dd_compensate"];
-    c.dd_drop.lambda_near = k["dd_lambda_near"];
-    c.dd_drop.lambda_middle = k["dd_lambda_middle"];
-    c.dd_drop.lambda_far = k["dd_lambda_far"];
+    read(k, "sh_degree", c.sh_degree);
+    read(k, "sh_increase_every", c.sh_increase_every);
+    read(k, "densify_grad_threshold", c.densify.grad_threshold);
+    read(k, "percent_dense", c.densify.percent_dense);
+    read(k, "min_opacity", c.densify.min_opacity);
+    read(k, "densify_from", c.densify_from);
+    read(k, "densify_until", c.densify_until);
+    read(k, "densify_every", c.densify_every);
+    read(k, "opacity_reset_at", c.opacity_reset_at);
+    read(k, "dropgaussian_max_rate", c.dropgaussian_max_rate);
+    read(k, "preset", c.preset);
+    read(k, "scene_preset", c.scene_preset);
+    read(k, "dd_weight_depth", c.dd_drop.weight_depth);
+    read(k, "dd_weight_density", c.dd_drop.weight_density);
+    read(k, "dd_rate_min", c.dd_drop.rate_min);
+    read(k, "dd_rate_max", c.dd_drop.rate_max);
+    read(k, "dd_rate_iterations", c.dd_drop.rate_iterations);
+    read(k, "dd_use_depth_score", c.dd_drop.use_depth_score);
+    read(k, "dd_use_density_score", c.dd_drop.use_density_score);
+    read(k, "dd_use_layers", c.dd_drop.use_layers);
+    read(k, "dd_compensate", c.dd_drop.compensate);
+    read(k, "dd_lambda_near", c.dd_drop.lambda_near);
+    read(k, "dd_lambda_middle", c.dd_drop.lambda_middle);
+    read(k, "dd_lambda_far", c.dd_drop.lambda_far);
     c.dd_drop.depth_mode = enum_from<DepthMode>(k["dd_depth_mode"], {{"euclidean", DepthMode::Euclidean}, {"release-dot", DepthMode::ReleaseDot}}, "dd_depth_mode");
-    c.density_refresh_every = k["density_refresh_every"];
-    c.release_density_cache = k["release_density_cache"];
-    c.dafe = k["dafe"];
-    c.dafe_prior_dir = k["dafe_prior_dir"];
+    read(k, "density_refresh_every", c.density_refresh_every);
+    read(k, "release_density_cache", c.release_density_cache);
+    read(k, "dafe", c.dafe);
+    read(k, "dafe_prior_dir", c.dafe_prior_dir);
     c.dafe_prior_kind = enum_from<PriorKind>(k["dafe_prior_kind"], {{"depth", PriorKind::Depth}, {"disparity", PriorKind::Disparity}}, "dafe_prior_kind");
     c.dafe_mask_rule = enum_from<DafeMaskRule>(k["dafe_mask_rule"], {{"percentile", DafeMaskRule::Percentile}, {"threshold", DafeMaskRule::Threshold}}, "dafe_mask_rule");
-    c.dafe_tau = k["dafe_tau"];
+    read(k, "dafe_tau", c.dafe_tau);
     c.dafe_loss_form = enum_from<DafeLossForm>(k["dafe_loss_form"], {{"paper", DafeLossForm::Paper}, {"release", DafeLossForm::Release}}, "dafe_loss_form");
-    c.dafe_lambda = k["dafe_lambda"];
-    c.save_iterations = k["save_iterations"].get<std::vector<int>>();
-    c.checkpoint_iterations = k["checkpoint_iterations"].get<std::vector<int>>();
-    c.test_iterations = k["test_iterations"].get<std::vector<int>>();
-    c.log_every = k["log_every"];
-    c.quiet = k["quiet"];
+    read(k, "dafe_lambda", c.dafe_lambda);
+    read(k, "save_iterations", c.save_iterations);
+    read(k, "checkpoint_iterations", c.checkpoint_iterations);
+    read(k, "test_iterations", c.test_iterations);
+    read(k, "log_every", c.log_every);
+    read(k, "quiet", c.quiet);
   } catch (const nlohmann::json::exception& e) {
-    fail("config: {}", e.what());
+    fail("{}", e.what());
   }
 }
 

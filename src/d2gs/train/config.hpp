@@ -3,6 +3,7 @@
 // The same structure is filled from command-line flags and from a JSON file (`--config`), and the
 // effective configuration is saved as MODEL_DIR/config.json.
 #include <cstdint>
+#include <filesystem>
 #include <string>
 #include <vector>
 
@@ -85,7 +86,8 @@ struct TrainConfig {
   int log_every = 10;
   bool quiet = false;
 
-  // Throws d2gs::Error for impossible values, naming the option.
+  // Throws d2gs::Error for impossible values, naming the option: ranges, an --init that is neither a
+  // keyword nor an existing file, a model folder that cannot be created (a path under a file).
   void validate() const;
 };
 
@@ -93,7 +95,15 @@ struct TrainConfig {
 SceneLoadOptions scene_load_options(const TrainConfig& c);
 
 void to_json(nlohmann::json& j, const TrainConfig& c);
-// Reads the keys present in `j` into `c` (others keep their values); an unknown key is an error.
+// Reads the keys present in `j` into `c` (others keep their values). An unknown key, a value of the wrong
+// type, a fraction for an integer option and a number outside its option's type (never wrapped or
+// truncated) are errors "key 'NAME': problem"; callers reading a file prefix its name. The options' own
+// ranges are validate()'s, as for the command line.
 void update_from_json(TrainConfig& c, const nlohmann::json& j);
+
+// The scene folder recorded in a run's config.json. d2gs train records it absolute; a relative one (an
+// older run, a hand-written file) is taken relative to the run folder `model_dir` when that exists there,
+// else relative to the working folder.
+std::filesystem::path recorded_source(const std::filesystem::path& model_dir, const std::string& source);
 
 }  // namespace d2gs

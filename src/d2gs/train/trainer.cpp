@@ -276,6 +276,7 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
     init = random_point_cloud(s.scene, s.split.train, s.cfg.random_points, range, s.cfg.seed);
   } else {
     init = read_point_cloud_ply(s.cfg.init);
+    if (init.empty()) fail_file(s.cfg.init, "the point cloud has no points (0 vertices); nothing to initialise from");
   }
   s.model = gaussians_from_point_cloud(init, s.cfg.sh_degree);
   s.adam = Adam::make_state(s.model);
