@@ -264,9 +264,19 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
   so.test_views = s.cfg.test_views;
   s.split = make_split(s.scene, so);
   if (s.split.train.empty()) fail("{}: no training views", s.cfg.source);
-  // What the run trains on (before "stereo" below becomes a folder), checked against a checkpoint before
-  // anything is read from the images or written.
-  s.identity = run_identity(s.scene, s.split, s.cfg);
+  // What the run trains on, checked against a checkpoint before anything is read from the images or
+  // written. "stereo" becomes a folder below, and config.json records that folder and kind depth: both
+  // spellings are one run, so that `--config MODEL/config.json --resume ...` continues it.
+  {
+    TrainConfig as_trained = s.cfg;
+    if (!as_trained.dafe_prior_dir.empty() && as_trained.dafe_prior_dir != "stereo") {
+      const auto is = [&](const fs::path& folder) { return fs::equivalent(as_trained.dafe_prior_dir, folder, ec); };
+      if (is(training_geometry_dir(s.scene, s.split.train.size()) / "depth") || is(s.out() / "init" / "depth"))
+        as_trained.dafe_prior_dir = "stereo";
+    }
+    if (as_trained.dafe_prior_dir == "stereo") as_trained.dafe_prior_kind = PriorKind::Depth;
+    s.identity = run_identity(s.scene, s.split, as_trained);
+  }
   std::optional<Checkpoint> checkpoint;
   if (resuming) {
     checkpoint = read_checkpoint(resume_from);
