@@ -7,11 +7,8 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
-#include <chrono>
-#include <cstdio>
 #include <functional>
 #include <map>
-#include <thread>
 
 #include <fmt/format.h>
 #include <gtest/gtest.h>
@@ -41,6 +38,14 @@ TrainConfig small_run(const fs::path& out, int iterations) {
   c.init = "random";
   c.random_points = 500;
   return c;
+}
+
+// A finished 4-iteration run in `dir` with a checkpoint at iteration 2; returns the checkpoint.
+fs::path finished_run_with_checkpoint(const fs::path& dir) {
+  auto cfg = small_run(dir, 4);
+  cfg.checkpoint_iterations = {2};
+  Trainer(cfg).run();
+  return dir / "chkpnt2.bin";
 }
 
 // The message of the d2gs::Error `make` throws ("" when it throws none).
@@ -104,10 +109,7 @@ TEST(Resume, RefusesACheckpointOfMoreTrainingViews) {
 // when it refuses.
 TEST(Resume, RefusesAnotherSceneResolutionSplitOrConfigurationAndLeavesTheRunAlone) {
   const auto dir = test::scratch_dir();
-  auto cfg = small_run(dir / "run", 4);
-  cfg.checkpoint_iterations = {2};
-  Trainer(cfg).run();
-  const auto ckpt = dir / "run/chkpnt2.bin";
+  const auto ckpt = finished_run_with_checkpoint(dir / "run");
   const auto before = snapshot(dir / "run");
   ASSERT_TRUE(before.count("results.json"));
 
@@ -167,6 +169,25 @@ TEST(Resume, RefusesAnotherSceneResolutionSplitOrConfigurationAndLeavesTheRunAlo
   EXPECT_EQ(changes(other_before, snapshot(dir / "other")), "");
 }
 
+// The usual way to continue a run by hand: its own config.json, where "stereo" is recorded as the folder it
+// resolved to.
+TEST(Resume, FromTheRunsOwnConfigJson) {
+  const auto dir = test::scratch_dir();
+  const fs::path run = dir / "run";
+  const auto first = test::run_cli(fmt::format("-q train -s '{}' -m '{}' -r 8 --n-views 3 --method d2gs --dafe-prior stereo "
+                                               "--init random --random-points 300 --iterations 4 --checkpoint-iterations 2 "
+                                               "--quiet", fern(), run.string()));
+  ASSERT_EQ(first.exit_code, 0) << first.output;
+  const auto saved = nlohmann::json::parse(read_file(run / "config.json"));
+  ASSERT_EQ(fs::path(saved["dafe_prior_dir"].get<std::string>()), run / "init/depth");
+  ASSERT_EQ(saved["dafe_prior_kind"], "depth");
+  const std::string model = read_file(run / "point_cloud/iteration_4/point_cloud.ply");
+  const auto again = test::run_cli(fmt::format("-q train --config '{}' --resume '{}'", (run / "config.json").string(),
+                                               (run / "chkpnt2.bin").string()));
+  ASSERT_EQ(again.exit_code, 0) << again.output;
+  EXPECT_EQ(read_file(run / "point_cloud/iteration_4/point_cloud.ply"), model);
+}
+
 // Bad 3: --iterations below the checkpoint trained nothing, exited 0, and results.json named an
 // iteration whose model did not exist.
 TEST(Resume, RefusesIterationsBelowTheCheckpointAndFinishesFromTheLastOne) {
@@ -202,10 +223,8 @@ TEST(Resume, RefusesIterationsBelowTheCheckpointAndFinishesFromTheLastOne) {
 // and a resume skipped it).
 TEST(TrainLock, OneTrainerPerModelFolder) {
   const auto dir = test::scratch_dir();
-  auto cfg = small_run(dir / "run", 4);
-  cfg.checkpoint_iterations = {2};
-  Trainer(cfg).run();
-  const auto ckpt = dir / "run/chkpnt2.bin";
+  const auto ckpt = finished_run_with_checkpoint(dir / "run");
+  const auto cfg = small_run(dir / "run", 4);
   {
     Trainer first(cfg, ckpt);
     const std::string message = error_of([&] { Trainer second(cfg, ckpt); });
@@ -231,9 +250,8 @@ TEST(TrainLock, OneTrainerPerModelFolder) {
 // Bad 7: a checkpoint write killed between open and rename left its temporary file for ever.
 TEST(TrainLock, RemovesTemporariesOfKilledWritersOnTheNextStart) {
   const auto dir = test::scratch_dir();
-  auto cfg = small_run(dir / "run", 4);
-  cfg.checkpoint_iterations = {2};
-  Trainer(cfg).run();
+  const auto ckpt = finished_run_with_checkpoint(dir / "run");
+  const auto cfg = small_run(dir / "run", 4);
   const long dead = dead_pid();
   const long alive = ::getpid();  // this test: alive while the command runs
   const fs::path stale1 = dir / fmt::format("run/.chkpnt4.tmp{}-0.bin", dead);
@@ -242,10 +260,10 @@ TEST(TrainLock, RemovesTemporariesOfKilledWritersOnTheNextStart) {
                                       dir / "run/.chkpnt4.tmpx-1.bin", dir / "run/notes.tmp1-1.txt"};
   const std::string resume = fmt::format("train -s '{}' -m '{}' -r 8 --n-views 3 --iterations 4 --init random "
                                          "--random-points 500 --seed 1 --quiet --resume '{}'",
-                                         fern(), (dir / "run").string(), (dir / "run/chkpnt2.bin").string());
+                                         fern(), (dir / "run").string(), ckpt.string());
   {
     // Only under the folder's lock: while another trainer holds it, nothing is removed.
-    Trainer holder(cfg, dir / "run/chkpnt2.bin");
+    Trainer holder(cfg, ckpt);
     for (const auto& p : kept) write_file_atomic(p, "keep");
     write_file_atomic(stale1, "half a checkpoint");
     write_file_atomic(stale2, "half a model");
@@ -271,21 +289,13 @@ TEST(Resume, RunInterruptedBeforeItsFirstCheckpointStartsAgain) {
   const fs::path run = dir / "run";
   const std::string args = fmt::format("train -s '{}' -m '{}' -r 8 --n-views 3 --init random --random-points 500 --quiet",
                                        fern(), run.string());
-  const std::string cmd = fmt::format("'{}' {} --iterations 100000 --checkpoint-iterations 100000 >'{}' 2>&1 & echo $!",
-                                      test::cli_path().string(), args, (dir / "first.log").string());
-  FILE* pipe = ::popen(cmd.c_str(), "r");
-  ASSERT_NE(pipe, nullptr);
-  int pid = 0;
-  ASSERT_EQ(std::fscanf(pipe, "%d", &pid), 1);
-  ::pclose(pipe);
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::minutes(5);
-  const auto logged = [&] { return fs::exists(run / "train_log.jsonl") && fs::file_size(run / "train_log.jsonl") > 0; };
-  while (!logged() && std::chrono::steady_clock::now() < deadline)
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  ASSERT_TRUE(logged()) << read_file(dir / "first.log");
+  const int pid = test::start_in_background(fmt::format("'{}' {} --iterations 100000 --checkpoint-iterations 100000 >'{}' 2>&1",
+                                                       test::cli_path().string(), args, (dir / "first.log").string()));
+  ASSERT_GT(pid, 0);
+  ASSERT_TRUE(test::wait_until([&] { return fs::exists(run / "train_log.jsonl") && fs::file_size(run / "train_log.jsonl") > 0; }))
+      << read_file(dir / "first.log");
   ::kill(pid, SIGTERM);
-  while (::kill(pid, 0) == 0 && std::chrono::steady_clock::now() < deadline)
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  ASSERT_TRUE(test::wait_until([&] { return ::kill(pid, 0) != 0; }));
   ASSERT_FALSE(fs::exists(run / "results.json"));
   const auto again = test::run_cli(args + " --iterations 3");
   ASSERT_EQ(again.exit_code, 0) << again.output;
@@ -316,10 +326,7 @@ TEST(Resume, RunInterruptedBeforeItsFirstCheckpointStartsAgain) {
 // Weak: flipped bytes in a checkpoint were found only if a value went non-finite.
 TEST(Resume, RefusesDamagedCheckpoints) {
   const auto dir = test::scratch_dir();
-  auto cfg = small_run(dir / "run", 4);
-  cfg.checkpoint_iterations = {2};
-  Trainer(cfg).run();
-  const std::string bytes = read_file(dir / "run/chkpnt2.bin");
+  const std::string bytes = read_file(finished_run_with_checkpoint(dir / "run"));
   auto resume = small_run(dir / "resumed", 4);
 
   std::string flipped = bytes;
