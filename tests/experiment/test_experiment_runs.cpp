@@ -1,9 +1,9 @@
 // `d2gs experiment` end to end on fern (1/8 resolution, 3 views, a few iterations): parallel runs, tables
 // and reports, skipping finished runs, resuming an interrupted run from its checkpoint (bit-identically),
-// a killed experiment resuming, a failing run not stopping the others.
+// passing over a damaged newest checkpoint, a killed experiment resuming, a failing run not stopping the
+// others.
 #include <csignal>
 #include <chrono>
-#include <cstdio>
 #include <thread>
 
 #include <fmt/format.h>
@@ -186,18 +186,11 @@ TEST(ExperimentRuns, KilledExperimentResumes) {
   const auto config = write_config(dir, {{{"method", "3dgs"}}}, {0}, 12, 2, true);
   const fs::path run = dir / "exp/runs/fern/3v/3dgs/seed0";
   // Start in its own process group, then kill the whole group once the first checkpoint exists.
-  const std::string cmd = "setsid '" + test::cli_path().string() + "' experiment --config '" + config.string() +
-                          "' -o '" + (dir / "exp").string() + "' --no-imr >'" + (dir / "first.log").string() +
-                          "' 2>&1 & echo $!";
-  FILE* pipe = ::popen(cmd.c_str(), "r");
-  ASSERT_NE(pipe, nullptr);
-  int pid = 0;
-  ASSERT_EQ(std::fscanf(pipe, "%d", &pid), 1);
-  ::pclose(pipe);
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::minutes(5);
-  while (!fs::exists(run / "chkpnt2.bin") && std::chrono::steady_clock::now() < deadline)
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  ASSERT_TRUE(fs::exists(run / "chkpnt2.bin")) << read_file(dir / "first.log");
+  const int pid = test::start_in_background("setsid '" + test::cli_path().string() + "' experiment --config '" +
+                                            config.string() + "' -o '" + (dir / "exp").string() + "' --no-imr >'" +
+                                            (dir / "first.log").string() + "' 2>&1");
+  ASSERT_GT(pid, 0);
+  ASSERT_TRUE(test::wait_until([&] { return fs::exists(run / "chkpnt2.bin"); })) << read_file(dir / "first.log");
   ::kill(-pid, SIGKILL);
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
   ASSERT_FALSE(fs::exists(run / "results.json")) << "the run finished before it could be killed";
