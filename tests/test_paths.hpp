@@ -2,11 +2,14 @@
 // Paths every test may use, and a scratch folder per test.
 #include <sys/wait.h>
 
+#include <chrono>
 #include <cstddef>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <functional>
 #include <string>
+#include <thread>
 
 #include <gtest/gtest.h>
 
@@ -51,6 +54,27 @@ inline CommandResult run_cli(const std::string& args) {
   const int status = ::pclose(pipe);
   result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
   return result;
+}
+
+// Starts `command` (shell syntax; redirect its output) in the background and returns its process id
+// (0 if it could not be started).
+inline int start_in_background(const std::string& command) {
+  FILE* pipe = ::popen((command + " & echo $!").c_str(), "r");
+  if (!pipe) return 0;
+  int pid = 0;
+  if (std::fscanf(pipe, "%d", &pid) != 1) pid = 0;
+  ::pclose(pipe);
+  return pid;
+}
+
+// Polls `done` every 20 ms until it holds or `limit` has passed; returns its last value.
+inline bool wait_until(const std::function<bool()>& done, std::chrono::seconds limit = std::chrono::minutes(5)) {
+  const auto deadline = std::chrono::steady_clock::now() + limit;
+  while (!done()) {
+    if (std::chrono::steady_clock::now() > deadline) return done();
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  return true;
 }
 
 }  // namespace d2gs::test

@@ -18,7 +18,8 @@ Run add_train_command(CLI::App& app) {
   cmd->footer(
       "Outputs (the original 3DGS layout): MODEL/config.json, cameras.json, input.ply,\n"
       "point_cloud/iteration_N/point_cloud.ply, train_log.jsonl, chkpntN.bin, test/ours_N/{renders,gt},\n"
-      "results.json. Defaults are the hyper-parameters of method.md §2.\n"
+      "results.json. Defaults are the hyper-parameters of method.md §2. One `d2gs train` at a time per\n"
+      "MODEL folder (a lock); a run stopped before its first checkpoint starts again with the same command.\n"
       "Example: d2gs train -s ../shared/data/nerf_llff_data/fern -m out/fern_3dgs -r 8 --n-views 3 --method 3dgs");
   auto cfg = std::make_shared<TrainConfig>();
   auto config_file = std::make_shared<std::string>();
@@ -118,7 +119,9 @@ Run add_train_command(CLI::App& app) {
   opt("--test-iterations", d.test_iterations, "test_iterations", "Iterations at which test PSNR/SSIM are logged")
       ->delimiter(',');
   flag("--quiet", d.quiet, "quiet", "No progress line");
-  cmd->add_option("--resume", *resume, "Continue from a checkpoint (chkpntN.bin) bit-identically");
+  cmd->add_option("--resume", *resume,
+                  "Continue from a checkpoint (chkpntN.bin) bit-identically: the same scene, -r, split and training "
+                  "options, --iterations at least the checkpoint's (anything else is refused: docs/formats.md)");
 
   return [cfg, config_file, resume, method, keys, preset, scene_preset, prior_kind, image_source, clamp_grad]() -> int {
     nlohmann::json flags;

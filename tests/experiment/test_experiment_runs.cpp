@@ -1,16 +1,18 @@
 // `d2gs experiment` end to end on fern (1/8 resolution, 3 views, a few iterations): parallel runs, tables
 // and reports, skipping finished runs, resuming an interrupted run from its checkpoint (bit-identically),
-// a killed experiment resuming, a failing run not stopping the others.
+// passing over a damaged newest checkpoint, a killed experiment resuming, a failing run not stopping the
+// others.
 #include <csignal>
 #include <chrono>
-#include <cstdio>
 #include <thread>
 
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/experiment/runner.hpp"
+#include "d2gs/train/checkpoint.hpp"
 #include "report/chromium.hpp"
 #include "test_paths.hpp"
 
@@ -136,23 +138,59 @@ TEST(ExperimentRuns, InterruptedRunResumesFromItsCheckpointBitIdentically) {
   EXPECT_EQ(psnr_of(run), psnr);
 }
 
+TEST(ExperimentRuns, DamagedNewestCheckpointFallsBackToAnOlderOne) {
+  const auto dir = test::scratch_dir();
+  const auto config = write_config(dir, {{{"method", "3dgs"}}}, {0}, 6, 3, true);
+  int code = -1;
+  std::string out = experiment(config, dir / "exp", "--no-imr", &code);
+  ASSERT_EQ(code, 0) << out;
+  const fs::path run = dir / "exp/runs/fern/3v/3dgs/seed0";
+  const double psnr = psnr_of(run);
+  const std::string ckpt6 = read_file(run / "chkpnt6.bin");
+  const auto interrupt = [&] {  // what a run killed after its last checkpoint leaves behind
+    for (const char* p : {"results.json", "report.html"}) fs::remove(run / p);
+    fs::remove_all(run / "test");
+    fs::remove_all(run / "point_cloud");
+  };
+  // The newest checkpoint cut short (a full disk): the runner used to retry it, and fail, at every rerun.
+  interrupt();
+  write_file_atomic(run / "chkpnt6.bin", ckpt6.substr(0, ckpt6.size() / 2));
+  out = experiment(config, dir / "exp", "--no-imr", &code);
+  ASSERT_EQ(code, 0) << out;
+  EXPECT_NE(out.find(fmt::format("resuming from chkpnt3.bin; passed over {}: truncated checkpoint ({} bytes of {})",
+                                 (run / "chkpnt6.bin").string(), ckpt6.size() / 2, ckpt6.size())),
+            std::string::npos)
+      << out;
+  EXPECT_EQ(psnr_of(run), psnr);  // the same run
+  EXPECT_EQ(read_checkpoint(run / "chkpnt6.bin").state.iteration, 6);  // written again, whole
+
+  // No checkpoint that reads back: start again, and say why.
+  interrupt();
+  for (const char* name : {"chkpnt3.bin", "chkpnt6.bin"}) {
+    std::string bytes = read_file(run / name);
+    bytes[bytes.size() / 2] = static_cast<char>(bytes[bytes.size() / 2] ^ 0x40);
+    write_file_atomic(run / name, bytes);
+  }
+  out = experiment(config, dir / "exp", "--no-imr", &code);
+  ASSERT_EQ(code, 0) << out;
+  EXPECT_NE(out.find("restarting (no usable checkpoint; passed over " + (run / "chkpnt6.bin").string() +
+                     ": damaged checkpoint: CRC-32 mismatch"),
+            std::string::npos)
+      << out;
+  EXPECT_NE(out.find((run / "chkpnt3.bin").string() + ": damaged checkpoint: CRC-32 mismatch"), std::string::npos) << out;
+  EXPECT_EQ(psnr_of(run), psnr);
+}
+
 TEST(ExperimentRuns, KilledExperimentResumes) {
   const auto dir = test::scratch_dir();
   const auto config = write_config(dir, {{{"method", "3dgs"}}}, {0}, 12, 2, true);
   const fs::path run = dir / "exp/runs/fern/3v/3dgs/seed0";
   // Start in its own process group, then kill the whole group once the first checkpoint exists.
-  const std::string cmd = "setsid '" + test::cli_path().string() + "' experiment --config '" + config.string() +
-                          "' -o '" + (dir / "exp").string() + "' --no-imr >'" + (dir / "first.log").string() +
-                          "' 2>&1 & echo $!";
-  FILE* pipe = ::popen(cmd.c_str(), "r");
-  ASSERT_NE(pipe, nullptr);
-  int pid = 0;
-  ASSERT_EQ(std::fscanf(pipe, "%d", &pid), 1);
-  ::pclose(pipe);
-  const auto deadline = std::chrono::steady_clock::now() + std::chrono::minutes(5);
-  while (!fs::exists(run / "chkpnt2.bin") && std::chrono::steady_clock::now() < deadline)
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  ASSERT_TRUE(fs::exists(run / "chkpnt2.bin")) << read_file(dir / "first.log");
+  const int pid = test::start_in_background("setsid '" + test::cli_path().string() + "' experiment --config '" +
+                                            config.string() + "' -o '" + (dir / "exp").string() + "' --no-imr >'" +
+                                            (dir / "first.log").string() + "' 2>&1");
+  ASSERT_GT(pid, 0);
+  ASSERT_TRUE(test::wait_until([&] { return fs::exists(run / "chkpnt2.bin"); })) << read_file(dir / "first.log");
   ::kill(-pid, SIGKILL);
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
   ASSERT_FALSE(fs::exists(run / "results.json")) << "the run finished before it could be killed";

@@ -6,9 +6,11 @@
 #include <atomic>
 #include <cerrno>
 #include <cstring>
+#include <regex>
 #include <system_error>
 
 #include "d2gs/core/error.hpp"
+#include "d2gs/core/file_lock.hpp"
 
 namespace d2gs {
 namespace fs = std::filesystem;
@@ -137,6 +139,29 @@ void check_output_file(const fs::path& file) {
     fail_file(file, "cannot write here: {}", why);
   if (fs::exists(file, ec) && ::access(file.c_str(), W_OK) != 0)
     fail_file(file, "is not writable: {}", std::strerror(errno));
+}
+
+long atomic_temporary_writer(const std::string& filename) {
+  // temporary_name(): "." + stem + ".tmp" + pid + "-" + counter + extension (none, or one dot and no other).
+  static const std::regex pattern(R"(\..+\.tmp([1-9][0-9]{0,9})-[0-9]+(\.[^.]*)?)");
+  std::smatch m;
+  if (!std::regex_match(filename, m, pattern)) return 0;
+  return std::stol(m[1].str());
+}
+
+std::vector<fs::path> remove_stale_temporaries(const fs::path& dir) {
+  std::vector<fs::path> stale;
+  std::error_code ec;
+  for (auto it = fs::recursive_directory_iterator(dir, ec); !ec && it != fs::recursive_directory_iterator();
+       it.increment(ec)) {
+    if (!it->is_regular_file(ec) || it->is_symlink(ec)) continue;
+    const long pid = atomic_temporary_writer(it->path().filename().string());
+    if (pid > 0 && pid != static_cast<long>(::getpid()) && !process_alive(pid)) stale.push_back(it->path());
+  }
+  std::vector<fs::path> removed;
+  for (const auto& p : stale)
+    if (fs::remove(p, ec)) removed.push_back(p);
+  return removed;
 }
 
 std::string read_file(const fs::path& path) {

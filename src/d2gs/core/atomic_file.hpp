@@ -5,7 +5,9 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <string>
 #include <string_view>
+#include <vector>
 
 namespace d2gs {
 
@@ -40,6 +42,14 @@ void write_file_atomic_with(const std::filesystem::path& path,
 void check_output_folder(const std::filesystem::path& dir);
 // The same for a file to be written: its folder is checked as above, and `file` is not a folder.
 void check_output_file(const std::filesystem::path& file);
+// The process id in the name of a temporary file of the writers above (".STEM.tmpPID-K.EXT", in the
+// destination's folder), 0 when `filename` is not one.
+long atomic_temporary_writer(const std::string& filename);
+// Removes the temporary files under `dir` (recursively) whose writer is no longer running on this
+// machine: what a writer killed between open and rename leaves behind. Returns the removed paths.
+// Call it only while holding the folder's lock: a writer on another machine sharing the folder looks
+// dead from here.
+std::vector<std::filesystem::path> remove_stale_temporaries(const std::filesystem::path& dir);
 // Reads a whole file; throws d2gs::Error naming the file when it cannot be read.
 std::string read_file(const std::filesystem::path& path);
 

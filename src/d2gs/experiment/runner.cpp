@@ -1,7 +1,6 @@
 #include "d2gs/experiment/runner.hpp"
 
 #include <fcntl.h>
-#include <sys/file.h>
 #include <sys/prctl.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -12,15 +11,17 @@
 #include <cstring>
 #include <fstream>
 #include <map>
-#include <regex>
 #include <thread>
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/json_value.hpp"
+#include "d2gs/core/file_lock.hpp"
 #include "d2gs/core/log.hpp"
+#include "d2gs/train/checkpoint.hpp"
 
 extern char** environ;
 
@@ -42,19 +43,20 @@ bool run_finished(const fs::path& out_dir, const RunSpec& run) {
   return fs::is_regular_file(out_dir / run.dir / "results.json");
 }
 
-std::optional<std::pair<int, fs::path>> latest_checkpoint(const fs::path& run_dir, int max_iteration) {
+std::optional<std::pair<int, fs::path>> usable_checkpoint(const fs::path& run_dir, int max_iteration,
+                                                          std::vector<std::string>* unusable) {
   std::error_code ec;
   if (!fs::is_directory(run_dir, ec)) return std::nullopt;
-  const std::regex re("chkpnt([0-9]{1,9})\\.bin");
-  std::optional<std::pair<int, fs::path>> best;
-  for (const auto& e : fs::directory_iterator(run_dir)) {
-    std::smatch m;
-    const std::string name = e.path().filename().string();
-    if (!e.is_regular_file() || !std::regex_match(name, m, re)) continue;
-    const int it = std::stoi(m[1]);
-    if (it <= max_iteration && (!best || it > best->first)) best = std::make_pair(it, e.path());
+  for (const auto& [iteration, path] : checkpoints_in(run_dir)) {
+    if (iteration > max_iteration) continue;
+    try {
+      (void)read_checkpoint(path);  // magic, format, size, CRC-32 and array shapes
+      return std::make_pair(iteration, path);
+    } catch (const Error& e) {
+      if (unusable) unusable->push_back(e.what());
+    }
   }
-  return best;
+  return std::nullopt;
 }
 
 namespace {
@@ -73,7 +75,7 @@ std::string last_error_line(const fs::path& log) {
 
 struct Child {
   std::size_t slot = 0;  // position in the run list
-  int lock_fd = -1;
+  FileLock lock;         // the run's lock, held while its process runs
   Clock::time_point started;
 };
 
@@ -153,17 +155,14 @@ std::vector<RunOutcome> run_all(const std::vector<RunSpec>& runs, const fs::path
     RunOutcome& out = outcomes[k];
     const fs::path log = root / "logs" / (run.id() + ".log");
     const fs::path lock = root / "logs" / (run.id() + ".lock");
-    const int lock_fd = ::open(lock.c_str(), O_WRONLY | O_CREAT | O_CLOEXEC, 0644);
-    if (lock_fd < 0) fail_file(lock, "cannot open ({})", std::strerror(errno));
-    if (::flock(lock_fd, LOCK_EX | LOCK_NB) != 0) {
-      ::close(lock_fd);
+    std::optional<FileLock> lock_held = FileLock::try_acquire(lock);
+    if (!lock_held) {
       out.status = RunStatus::Busy;
       say(fmt::format("run {} {}: skipped, another runner is training it", run.index, run.id()));
       return;
     }
     // Checked again under the lock: another runner may have finished it meanwhile.
     if (run_finished(root, run)) {
-      ::close(lock_fd);
       out.status = RunStatus::Skipped;
       return;
     }
@@ -173,14 +172,21 @@ std::vector<RunOutcome> run_all(const std::vector<RunSpec>& runs, const fs::path
     std::vector<std::string> args = {program.string(), "train", "--config", config.string()};
     const int iterations = run.train_config.at("iterations").get<int>();
     std::string how = "starting";
-    if (const auto ckpt = latest_checkpoint(run_dir, iterations)) {
+    // The newest checkpoint that reads back whole: a damaged newer one (a full disk, a crash of the
+    // machine) is passed over, and rewritten when the resumed run reaches its iteration again.
+    std::vector<std::string> unusable;
+    const auto ckpt = usable_checkpoint(run_dir, iterations, &unusable);
+    const std::string passed_over =
+        unusable.empty() ? "" : fmt::format("; passed over {}", fmt::join(unusable, "; "));
+    if (ckpt) {
       args.insert(args.end(), {"--resume", ckpt->second.string()});
       out.resumed_from = ckpt->first;
-      how = fmt::format("resuming from {}", ckpt->second.filename().string());
+      how = fmt::format("resuming from {}{}", ckpt->second.filename().string(), passed_over);
     } else if (fs::exists(run_dir)) {
-      // Killed before its first checkpoint: nothing to continue from.
+      // Killed before its first checkpoint, or no checkpoint reads back: nothing to continue from.
       fs::remove_all(run_dir);
-      how = "restarting (no checkpoint left by the previous attempt)";
+      how = unusable.empty() ? "restarting (no checkpoint left by the previous attempt)"
+                             : fmt::format("restarting (no usable checkpoint{})", passed_over);
     }
     fs::create_directories(run_dir.parent_path());
     {
@@ -190,9 +196,8 @@ std::vector<RunOutcome> run_all(const std::vector<RunSpec>& runs, const fs::path
     say(fmt::format("run {} {}: {} (log: {})", run.index, run.id(), how, log.string()));
     try {
       const pid_t pid = spawn(args, env, log);
-      running[pid] = Child{k, lock_fd, Clock::now()};
+      running.emplace(pid, Child{k, std::move(*lock_held), Clock::now()});
     } catch (const Error& e) {
-      ::close(lock_fd);
       out.status = RunStatus::Failed;
       out.message = e.what();
       say(fmt::format("run {} {}: FAILED to start: {}", run.index, run.id(), e.what()));
@@ -210,7 +215,7 @@ std::vector<RunOutcome> run_all(const std::vector<RunSpec>& runs, const fs::path
     }
     const auto it = running.find(pid);
     if (it == running.end()) continue;
-    const Child child = it->second;
+    const Child child = std::move(it->second);
     running.erase(it);
     const RunSpec& run = runs[child.slot];
     RunOutcome& out = outcomes[child.slot];
@@ -232,11 +237,7 @@ std::vector<RunOutcome> run_all(const std::vector<RunSpec>& runs, const fs::path
       if (!options.keep_checkpoints) {
         // Checkpoints served their purpose once results.json exists.
         std::error_code ec;
-        std::vector<fs::path> checkpoints;
-        const std::regex re("chkpnt[0-9]+\\.bin");
-        for (const auto& e : fs::directory_iterator(root / run.dir, ec))
-          if (std::regex_match(e.path().filename().string(), re)) checkpoints.push_back(e.path());
-        for (const auto& p : checkpoints) fs::remove(p, ec);
+        for (const auto& [iteration, path] : checkpoints_in(root / run.dir)) fs::remove(path, ec);
       }
       say(fmt::format("run {} {}: finished in {:.1f} s ({})", run.index, run.id(), out.seconds, metrics));
     } else {
@@ -246,8 +247,7 @@ std::vector<RunOutcome> run_all(const std::vector<RunSpec>& runs, const fs::path
       out.message = why + ": " + last_error_line(log);
       say(fmt::format("run {} {}: FAILED ({}); log: {}", run.index, run.id(), out.message, log.string()));
     }
-    ::close(child.lock_fd);
-  }
+  }  // the run's lock is released with `child`
   return outcomes;
 }
 

@@ -2,8 +2,9 @@
 // Runs an experiment's training runs on this machine: each run is a child process of the same d2gs
 // program (`d2gs train --config DIR/configs/ID.json [--resume chkpntN.bin]`, output to DIR/logs/ID.log),
 // up to `jobs` at a time. A run with results.json is finished and skipped; a run folder with a
-// checkpoint resumes from its latest one; a run folder without one starts again from scratch. A failed
-// run is reported and does not stop the others. A per-run lock file keeps two runners (two local
+// checkpoint resumes from its latest one that reads back whole (a damaged newer one is passed over, and
+// the log says so); a run folder without one starts again from scratch. A failed run is reported and
+// does not stop the others. A per-run lock file (core/file_lock.hpp) keeps two runners (two local
 // invocations, or a requeued Slurm task) from training the same run at once.
 #include <filesystem>
 #include <functional>
@@ -36,9 +37,11 @@ struct RunnerOptions {
 
 // True when the run's folder holds results.json.
 bool run_finished(const std::filesystem::path& out_dir, const RunSpec& run);
-// The highest chkpntN.bin (N ≤ max_iteration) in `run_dir`, with N.
-std::optional<std::pair<int, std::filesystem::path>> latest_checkpoint(const std::filesystem::path& run_dir,
-                                                                       int max_iteration);
+// The highest chkpntN.bin (N ≤ max_iteration) in `run_dir` that reads back whole (format, size, CRC-32),
+// with N; the reasons the higher ones could not be used are appended to `unusable`.
+std::optional<std::pair<int, std::filesystem::path>> usable_checkpoint(const std::filesystem::path& run_dir,
+                                                                       int max_iteration,
+                                                                       std::vector<std::string>* unusable = nullptr);
 // Runs the given runs (skipping finished ones) and returns one outcome per run, in run order.
 std::vector<RunOutcome> run_all(const std::vector<RunSpec>& runs, const std::filesystem::path& out_dir,
                                 const RunnerOptions& options);

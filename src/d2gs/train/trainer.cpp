@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <optional>
 #include <set>
 
 #include <nlohmann/json.hpp>
@@ -14,11 +15,13 @@
 
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
+#include "d2gs/core/file_lock.hpp"
 #include "d2gs/core/npy.hpp"
 #include "d2gs/core/random.hpp"
 #include "d2gs/model/ply.hpp"
 #include "d2gs/render/activations.hpp"
 #include "d2gs/render/rasterizer.hpp"
+#include "d2gs/train/checkpoint.hpp"
 #include "d2gs/train/densify.hpp"
 #include "d2gs/train/dropout.hpp"
 #include "d2gs/train/initialize.hpp"
@@ -49,64 +52,14 @@ std::string format_duration(double seconds) {
   return fmt::format("{:02}:{:02}", s / 60, s % 60);
 }
 
-// Binary checkpoint helpers: little-endian raw arrays after a JSON header.
-void put_vec(std::string& out, const std::vector<float>& v) {
-  const std::uint64_t n = v.size();
-  out.append(reinterpret_cast<const char*>(&n), sizeof n);
-  out.append(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(float));
-}
-
-struct Reader {
-  std::string_view bytes;
-  std::size_t pos = 0;
-  fs::path source;
-  std::vector<float> vec() {
-    std::uint64_t n = 0;
-    if (bytes.size() - pos < sizeof n) fail_file(source, "truncated checkpoint");
-    std::memcpy(&n, bytes.data() + pos, sizeof n);
-    pos += sizeof n;
-    if (n > (bytes.size() - pos) / sizeof(float)) fail_file(source, "truncated checkpoint");
-    std::vector<float> v(n);
-    std::memcpy(v.data(), bytes.data() + pos, n * sizeof(float));
-    pos += n * sizeof(float);
-    return v;
-  }
-};
-
-void put_model(std::string& out, const Gaussians& g) {
-  for (const auto* a : {&g.means, &g.log_scales, &g.quats, &g.opacity_logits, &g.sh_dc, &g.sh_rest}) put_vec(out, *a);
-}
-Gaussians get_model(Reader& r, int degree) {
-  Gaussians g;
-  g.sh_degree = degree;
-  for (auto* a : {&g.means, &g.log_scales, &g.quats, &g.opacity_logits, &g.sh_dc, &g.sh_rest}) *a = r.vec();
-  g.validate();
-  return g;
-}
-
-nlohmann::json rng_json(const Rng& rng) {
-  const auto st = rng.state();
-  std::uint64_t spare_bits = 0;
-  std::memcpy(&spare_bits, &st.spare, sizeof spare_bits);
-  return {{"words", {st.words[0], st.words[1], st.words[2], st.words[3]}}, {"spare", spare_bits}, {"has_spare", st.has_spare}};
-}
-void rng_from_json(Rng& rng, const nlohmann::json& j) {
-  Rng::State st{};
-  for (int i = 0; i < 4; ++i) st.words[i] = j.at("words").at(static_cast<std::size_t>(i)).get<std::uint64_t>();
-  const auto spare_bits = j.at("spare").get<std::uint64_t>();
-  std::memcpy(&st.spare, &spare_bits, sizeof st.spare);
-  st.has_spare = j.at("has_spare").get<bool>();
-  rng.set_state(st);
-}
-
-const char* kCheckpointMagic = "D2GSCKPT1\n";
-
 }  // namespace
 
 struct Trainer::State {
   TrainConfig cfg;
   Scene scene;
   Split split;
+  RunIdentity identity;                       // what the run trains on, recorded in its checkpoints
+  std::optional<FileLock> folder_lock;        // held on the model folder for the trainer's lifetime
   std::vector<Image> train_images;            // by position in split.train
   std::vector<render::RenderCamera> train_cameras;
   float extent = 1.0f;
@@ -139,19 +92,92 @@ struct Trainer::State {
 
 namespace {
 
-void check_model_dir(const TrainConfig& cfg, bool resuming) {
-  const fs::path dir = cfg.model_dir;
+// The lock file of a model folder: one `d2gs train` at a time, released by the kernel when it ends.
+constexpr const char* kLockFile = ".d2gs-train.lock";
+
+// A fresh start in `dir` (already locked): refuse to overwrite a run that saved a model or a checkpoint, or
+// a folder d2gs did not make; start again where a run was interrupted before it saved either.
+void check_fresh_start(const fs::path& dir, bool started_before) {
   std::error_code ec;
-  if (!fs::exists(dir, ec)) return;
-  if (!fs::is_directory(dir, ec)) fail_file(dir, "exists and is not a folder");
-  if (resuming) return;
-  if (fs::exists(dir / "config.json")) {
-    if (fs::exists(dir / "point_cloud") || fs::exists(dir / "train_log.jsonl"))
-      fail_file(dir, "already holds a training run (use a new folder, or --resume CHECKPOINT)");
+  bool empty = true;
+  for (const auto& e : fs::directory_iterator(dir, ec))
+    if (e.path().filename() != kLockFile) empty = false;
+  if (empty) return;
+  if (fs::exists(dir / "results.json", ec))
+    fail_file(dir, "already holds a finished training run (use a new folder)");
+  if (const auto checkpoints = checkpoints_in(dir); !checkpoints.empty())
+    fail_file(dir, "already holds an unfinished training run (continue it with --resume {}, or use a new folder)",
+              checkpoints.front().second.string());
+  if (fs::exists(dir / "point_cloud", ec) || fs::exists(dir / "test", ec))
+    fail_file(dir, "already holds a training run (use a new folder, or --resume CHECKPOINT)");
+  if (started_before || fs::exists(dir / "config.json", ec)) {
+    if (started_before || fs::exists(dir / "train_log.jsonl", ec))
+      spdlog::warn("{}: starting the run again: the previous one was interrupted before it saved a model or a checkpoint",
+                   dir.string());
     return;
   }
-  if (fs::directory_iterator(dir, ec) != fs::directory_iterator{})
-    fail_file(dir, "is not empty and holds no d2gs run; refusing to write into it");
+  fail_file(dir, "is not empty and holds no d2gs run; refusing to write into it");
+}
+
+// Resuming into `dir` (already locked): a run already there must be the one being resumed.
+void check_resumed_run_in_folder(const fs::path& dir, const TrainConfig& cfg, const Split& split) {
+  const fs::path file = dir / "config.json";
+  std::error_code ec;
+  if (!fs::is_regular_file(file, ec)) return;
+  nlohmann::json j;
+  try {
+    j = nlohmann::json::parse(read_file(file));
+    if (j.at("method") == to_string(cfg.method) && j.at("seed") == cfg.seed && j.at("resolution") == cfg.resolution &&
+        j.at("split").at("train") == split.train && j.at("split").at("test") == split.test)
+      return;
+  } catch (const nlohmann::json::exception&) {
+    fail_file(file, "cannot tell whether the folder holds the run being resumed (not a d2gs config.json)");
+  }
+  fail_file(dir, "holds another run (method {}, seed {}, -r {}, training views {}); resume into the checkpoint's run "
+                 "folder or a new one", j["method"].dump(), j["seed"].dump(), j["resolution"].dump(),
+            j["split"]["train"].dump());
+}
+
+// Creates and locks the model folder, removes what killed writers left there, and checks what it holds.
+FileLock lock_model_dir(const fs::path& dir, bool resuming) {
+  std::error_code ec;
+  const bool started_before = fs::exists(dir / kLockFile, ec);
+  fs::create_directories(dir, ec);
+  if (ec) fail_file(dir, "cannot create the folder ({})", ec.message());
+  std::optional<FileLock> lock = FileLock::try_acquire(dir / kLockFile);
+  if (!lock) {
+    const long pid = lock_file_holder(dir / kLockFile);
+    fail_file(dir, "another d2gs train{} is running in this folder", pid > 0 ? fmt::format(" (process {})", pid) : "");
+  }
+  const auto removed = remove_stale_temporaries(dir);
+  if (!removed.empty()) {
+    std::string names;
+    for (const auto& p : removed) names += (names.empty() ? "" : ", ") + p.lexically_relative(dir).string();
+    spdlog::info("{}: removed {} temporary file(s) of writers that were killed: {}", dir.string(), removed.size(), names);
+  }
+  if (!resuming) check_fresh_start(dir, started_before);
+  return std::move(*lock);
+}
+
+// Puts a checkpoint's state into the trainer (the scene, split and initial model are already loaded).
+void restore(Trainer::State& s, TrainingState&& t) {
+  s.iteration = t.iteration;
+  s.active_sh = t.active_sh;
+  s.adam.step = t.adam_step;
+  s.elapsed_before = t.elapsed_s;
+  s.camera_stack = std::move(t.camera_stack);
+  s.rng_cameras.set_state(t.rng_cameras);
+  s.rng_dropout.set_state(t.rng_dropout);
+  s.rng_densify.set_state(t.rng_densify);
+  s.model = std::move(t.model);
+  s.adam.exp_avg = std::move(t.exp_avg);
+  s.adam.exp_avg_sq = std::move(t.exp_avg_sq);
+  s.stats.restore(std::move(t.grad_sums), std::move(t.grad_counts));
+  s.density_cache = std::move(t.density_cache);
+  if (t.dafe_masks.empty())
+    s.dafe_masks.assign(s.split.train.size(), {});
+  else
+    s.dafe_masks = std::move(t.dafe_masks);
 }
 
 void load_dafe_priors(Trainer::State& s) {
@@ -224,7 +250,10 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
   auto& s = *s_;
   config.validate();
   s.cfg = std::move(config);
-  check_model_dir(s.cfg, !resume_from.empty());
+  const bool resuming = !resume_from.empty();
+  std::error_code ec;
+  if (fs::exists(s.cfg.model_dir, ec) && !fs::is_directory(s.cfg.model_dir, ec))
+    fail_file(s.cfg.model_dir, "exists and is not a folder");
   s.scene = load_scene(s.cfg.source, scene_load_options(s.cfg));
   SplitOptions so;
   so.n_views = s.cfg.n_views;
@@ -232,6 +261,27 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
   so.test_views = s.cfg.test_views;
   s.split = make_split(s.scene, so);
   if (s.split.train.empty()) fail("{}: no training views", s.cfg.source);
+  // What the run trains on, checked against a checkpoint before anything is read from the images or
+  // written. "stereo" becomes a folder below, and config.json records that folder and kind depth: both
+  // spellings are one run, so that `--config MODEL/config.json --resume ...` continues it.
+  {
+    TrainConfig as_trained = s.cfg;
+    if (!as_trained.dafe_prior_dir.empty() && as_trained.dafe_prior_dir != "stereo") {
+      const auto is = [&](const fs::path& folder) { return fs::equivalent(as_trained.dafe_prior_dir, folder, ec); };
+      if (is(training_geometry_dir(s.scene, s.split.train.size()) / "depth") || is(s.out() / "init" / "depth"))
+        as_trained.dafe_prior_dir = "stereo";
+    }
+    if (as_trained.dafe_prior_dir == "stereo") as_trained.dafe_prior_kind = PriorKind::Depth;
+    s.identity = run_identity(s.scene, s.split, as_trained);
+  }
+  std::optional<Checkpoint> checkpoint;
+  if (resuming) {
+    checkpoint = read_checkpoint(resume_from);
+    if (const std::string warning = check_resume(resume_from, *checkpoint, s.identity, s.cfg.iterations); !warning.empty())
+      spdlog::warn("{}", warning);
+  }
+  s.folder_lock = lock_model_dir(s.out(), resuming);
+  if (resuming) check_resumed_run_in_folder(s.out(), s.cfg, s.split);
   for (int v : s.split.train) {
     s.train_images.push_back(load_image(s.scene, v));
     s.train_cameras.push_back(render::make_render_camera(s.scene.cameras[static_cast<std::size_t>(v)]));
@@ -288,47 +338,9 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
   load_dafe_priors(s);
 
   fs::create_directories(s.out());
-  if (!resume_from.empty()) {
-    const std::string bytes = read_file(resume_from);
-    const std::string_view magic(kCheckpointMagic);
-    if (bytes.size() < magic.size() + 8 || std::string_view(bytes).substr(0, magic.size()) != magic)
-      fail_file(resume_from, "not a d2gs checkpoint");
-    std::uint64_t header_len = 0;
-    std::memcpy(&header_len, bytes.data() + magic.size(), sizeof header_len);
-    if (header_len > bytes.size() - magic.size() - 8) fail_file(resume_from, "truncated checkpoint");
-    nlohmann::json h;
-    try {
-      h = nlohmann::json::parse(bytes.substr(magic.size() + 8, header_len));
-      s.iteration = h.at("iteration");
-      s.active_sh = h.at("active_sh");
-      s.adam.step = h.at("adam_step");
-      s.elapsed_before = h.at("elapsed_s");
-      s.camera_stack = h.at("camera_stack").get<std::vector<int>>();
-      rng_from_json(s.rng_cameras, h.at("rng_cameras"));
-      rng_from_json(s.rng_dropout, h.at("rng_dropout"));
-      rng_from_json(s.rng_densify, h.at("rng_densify"));
-      if (h.at("seed").get<std::uint64_t>() != s.cfg.seed || h.at("method").get<std::string>() != to_string(s.cfg.method))
-        fail_file(resume_from, "was written by a run with another seed or method");
-    } catch (const nlohmann::json::exception& e) {
-      fail_file(resume_from, "corrupt checkpoint header ({})", e.what());
-    }
-    Reader r{bytes, magic.size() + 8 + header_len, resume_from};
-    const int degree = h.at("sh_degree");
-    s.model = get_model(r, degree);
-    s.adam.exp_avg = get_model(r, degree);
-    s.adam.exp_avg_sq = get_model(r, degree);
-    auto sums = r.vec();
-    auto counts = r.vec();
-    s.stats.restore(std::move(sums), std::move(counts));
-    s.density_cache = r.vec();
-    const std::size_t masks = h.at("dafe_masks");
-    s.dafe_masks.assign(s.split.train.size(), {});
-    for (std::size_t k = 0; k < masks && k < s.dafe_masks.size(); ++k) {
-      const auto m = r.vec();
-      s.dafe_masks[k].assign(m.begin(), m.end());
-    }
-    if (s.adam.exp_avg.size() != s.model.size() || s.stats.size() != s.model.size())
-      fail_file(resume_from, "checkpoint arrays are not aligned");
+  if (checkpoint) {
+    restore(s, std::move(checkpoint->state));
+    checkpoint.reset();
     spdlog::info("resumed from {} at iteration {}", resume_from.string(), s.iteration);
   } else {
     write_point_cloud_ply(s.out() / "input.ply", init);
@@ -492,24 +504,24 @@ IterationRecord Trainer::step() {
 
 void Trainer::save_checkpoint(const fs::path& path) const {
   const auto& s = *s_;
-  nlohmann::json h = {{"iteration", s.iteration}, {"active_sh", s.active_sh}, {"adam_step", s.adam.step},
-                      {"elapsed_s", s.elapsed()}, {"camera_stack", s.camera_stack}, {"sh_degree", s.model.sh_degree},
-                      {"seed", s.cfg.seed}, {"method", to_string(s.cfg.method)},
-                      {"rng_cameras", rng_json(s.rng_cameras)}, {"rng_dropout", rng_json(s.rng_dropout)},
-                      {"rng_densify", rng_json(s.rng_densify)}, {"dafe_masks", s.dafe_masks.size()}};
-  const std::string header = h.dump();
-  std::string bytes(kCheckpointMagic);
-  const std::uint64_t header_len = header.size();
-  bytes.append(reinterpret_cast<const char*>(&header_len), sizeof header_len);
-  bytes += header;
-  put_model(bytes, s.model);
-  put_model(bytes, s.adam.exp_avg);
-  put_model(bytes, s.adam.exp_avg_sq);
-  put_vec(bytes, s.stats.sums());
-  put_vec(bytes, s.stats.counts());
-  put_vec(bytes, s.density_cache);
-  for (const auto& m : s.dafe_masks) put_vec(bytes, std::vector<float>(m.begin(), m.end()));
-  write_file_atomic(path, bytes);
+  TrainingState t;
+  t.iteration = s.iteration;
+  t.iterations = s.cfg.iterations;
+  t.active_sh = s.active_sh;
+  t.adam_step = s.adam.step;
+  t.elapsed_s = s.elapsed();
+  t.camera_stack = s.camera_stack;
+  t.rng_cameras = s.rng_cameras.state();
+  t.rng_dropout = s.rng_dropout.state();
+  t.rng_densify = s.rng_densify.state();
+  t.model = s.model;
+  t.exp_avg = s.adam.exp_avg;
+  t.exp_avg_sq = s.adam.exp_avg_sq;
+  t.grad_sums = s.stats.sums();
+  t.grad_counts = s.stats.counts();
+  t.density_cache = s.density_cache;
+  t.dafe_masks = s.dafe_masks;
+  write_checkpoint(path, s.identity, t);
 }
 
 EvalSummary Trainer::evaluate_test_views(const fs::path& render_dir) const {
@@ -571,6 +583,16 @@ void Trainer::run() {
   }
   s.outputs = false;
   if (!cfg.quiet && ::isatty(STDERR_FILENO)) std::fprintf(stderr, "\n");
+  // Resumed from the checkpoint of the run's last iteration (check_resume allows no other at that
+  // iteration): nothing to train, and the model is the final one, since the last iteration changes nothing
+  // after its save. Save it where that save is missing, so that results.json names a model that exists.
+  if (start == cfg.iterations) {
+    const fs::path ply = s.out() / "point_cloud" / fmt::format("iteration_{}", start) / "point_cloud.ply";
+    const bool saved_at_end = cfg.save_iterations.empty() ||
+                              std::find(cfg.save_iterations.begin(), cfg.save_iterations.end(), start) != cfg.save_iterations.end();
+    std::error_code ec;
+    if (saved_at_end && !fs::exists(ply, ec)) write_gaussians_ply(ply, s.model);
+  }
   // Final evaluation on the held-out views, in the original render.py layout.
   if (!s.split.test.empty()) {
     const auto e = evaluate_test_views(s.out() / "test" / fmt::format("ours_{}", s.iteration));

@@ -1,0 +1,37 @@
+#pragma once
+// An exclusive lock on a folder or a job, as a flock(2) on a lock file: held for the lifetime of the
+// FileLock object and released by the kernel when the process ends, however it ends (a crash or
+// SIGKILL leaves no stale lock). The holder writes its process id into the file, for the message of
+// whoever finds it taken. Advisory: it keeps out only the programs that take the same lock.
+#include <filesystem>
+#include <optional>
+
+namespace d2gs {
+
+class FileLock {
+public:
+  // Takes the lock on `path` (created when missing) without waiting; nullopt when another process
+  // (or another FileLock of this process) holds it. Throws d2gs::Error when the file cannot be opened.
+  static std::optional<FileLock> try_acquire(const std::filesystem::path& path);
+
+  FileLock(FileLock&& other) noexcept;
+  FileLock& operator=(FileLock&& other) noexcept;
+  FileLock(const FileLock&) = delete;
+  FileLock& operator=(const FileLock&) = delete;
+  ~FileLock();  // releases the lock (the file stays: removing it would race with the next holder)
+
+  const std::filesystem::path& path() const { return path_; }
+
+private:
+  FileLock(int fd, std::filesystem::path path) : fd_(fd), path_(std::move(path)) {}
+  int fd_ = -1;
+  std::filesystem::path path_;
+};
+
+// The process id its holder wrote into the lock file at `path`, 0 when there is none.
+long lock_file_holder(const std::filesystem::path& path);
+
+// True when a process with this id runs on this machine.
+bool process_alive(long pid);
+
+}  // namespace d2gs

@@ -1,0 +1,436 @@
+#include "d2gs/train/checkpoint.hpp"
+
+#include <algorithm>
+#include <bit>
+#include <cstring>
+#include <limits>
+#include <regex>
+#include <stdexcept>
+#include <set>
+
+#include <fmt/format.h>
+#include <fmt/ranges.h>
+
+#include "d2gs/core/atomic_file.hpp"
+#include "d2gs/core/checksum.hpp"
+#include "d2gs/core/error.hpp"
+
+namespace d2gs {
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+static_assert(std::endian::native == std::endian::little, "checkpoint arrays are stored little-endian, as in memory");
+
+namespace {
+
+constexpr std::string_view kMagicPrefix = "D2GSCKPT";  // then the format number and '\n'
+constexpr std::size_t kCrcBytes = 4;
+
+// Header integers: of JSON integer type and in range (a float or an out-of-range value is damage, never
+// converted).
+template <typename T>
+T integer(const json& j) {
+  if (!j.is_number_integer()) throw std::invalid_argument("expected an integer, found " + j.dump());
+  if (j.is_number_unsigned()) {
+    const auto v = j.get<std::uint64_t>();
+    if (v > static_cast<std::uint64_t>(std::numeric_limits<T>::max())) throw std::invalid_argument("out of range: " + j.dump());
+    return static_cast<T>(v);
+  }
+  const auto v = j.get<std::int64_t>();
+  if (v < static_cast<std::int64_t>(std::numeric_limits<T>::min()) ||
+      (v > 0 && static_cast<std::uint64_t>(v) > static_cast<std::uint64_t>(std::numeric_limits<T>::max())))
+    throw std::invalid_argument("out of range: " + j.dump());
+  return static_cast<T>(v);
+}
+
+template <typename T>
+std::vector<T> integers(const json& j) {
+  if (!j.is_array()) throw std::invalid_argument("expected an array, found " + j.dump());
+  std::vector<T> out;
+  out.reserve(j.size());
+  for (const auto& v : j) out.push_back(integer<T>(v));
+  return out;
+}
+
+// ---- the identity of a run ----
+
+// The keys of config.json that are not part of RunIdentity::options (see checkpoint.hpp).
+constexpr const char* kNotCompared[] = {"source",          "model_dir",       "resolution",
+                                        "n_views",         "train_views",     "test_views",
+                                        "iterations",      "save_iterations", "checkpoint_iterations",
+                                        "test_iterations", "log_every",       "quiet"};
+
+std::string absolute_path(const std::string& p) {
+  std::error_code ec;
+  const fs::path a = fs::weakly_canonical(fs::absolute(p), ec);
+  return ec ? fs::absolute(p).lexically_normal().string() : a.string();
+}
+
+json run_to_json(const RunIdentity& r) {
+  json sizes = json::array();
+  for (const auto& [width, height] : r.train_sizes) sizes.push_back(json::array({width, height}));
+  json j = json::object();
+  j["scene"] = r.scene;
+  j["scene_format"] = r.scene_format;
+  j["images_folder"] = r.images_folder;
+  j["resolution"] = r.resolution;
+  j["scene_images"] = r.scene_images;
+  j["split"] = {{"train", r.train_views}, {"test", r.test_views}};
+  j["train_images"] = r.train_images;
+  j["train_sizes"] = std::move(sizes);
+  j["options"] = r.options;
+  return j;
+}
+
+RunIdentity run_from_json(const json& j) {
+  RunIdentity r;
+  r.scene = j.at("scene").get<std::string>();
+  r.scene_format = j.at("scene_format").get<std::string>();
+  r.images_folder = j.at("images_folder").get<std::string>();
+  r.resolution = integer<int>(j.at("resolution"));
+  r.scene_images = integer<int>(j.at("scene_images"));
+  r.train_views = integers<int>(j.at("split").at("train"));
+  r.test_views = integers<int>(j.at("split").at("test"));
+  r.train_images = j.at("train_images").get<std::vector<std::string>>();
+  for (const auto& size : j.at("train_sizes")) {
+    const auto wh = integers<int>(size);
+    if (wh.size() != 2 || wh[0] < 0 || wh[1] < 0) throw std::invalid_argument("an image size is not a width and a height");
+    r.train_sizes.push_back({wh[0], wh[1]});
+  }
+  r.options = j.at("options");
+  if (!r.options.is_object()) throw std::invalid_argument("options is not an object");
+  if (r.train_images.size() != r.train_views.size() || r.train_sizes.size() != r.train_views.size())
+    throw std::invalid_argument("the training views, their names and their sizes differ in number");
+  return r;
+}
+
+// ---- random streams ----
+
+json rng_to_json(const Rng::State& st) {
+  std::uint64_t spare_bits = 0;
+  std::memcpy(&spare_bits, &st.spare, sizeof spare_bits);
+  return {{"words", {st.words[0], st.words[1], st.words[2], st.words[3]}}, {"spare", spare_bits}, {"has_spare", st.has_spare}};
+}
+
+Rng::State rng_from_json(const json& j) {
+  Rng::State st{};
+  const auto& words = j.at("words");
+  if (!words.is_array() || words.size() != 4) throw std::invalid_argument("a random stream needs 4 words");
+  for (std::size_t i = 0; i < 4; ++i) st.words[i] = integer<std::uint64_t>(words.at(i));
+  const auto spare_bits = integer<std::uint64_t>(j.at("spare"));
+  std::memcpy(&st.spare, &spare_bits, sizeof st.spare);
+  st.has_spare = j.at("has_spare").get<bool>();
+  return st;
+}
+
+// ---- body: arrays, each a u64 element count and the elements (little-endian) ----
+
+template <typename T>
+std::uint64_t array_bytes(const std::vector<T>& v) {
+  return sizeof(std::uint64_t) + v.size() * sizeof(T);
+}
+
+template <typename T>
+void put_array(std::string& out, const std::vector<T>& v) {
+  const std::uint64_t n = v.size();
+  out.append(reinterpret_cast<const char*>(&n), sizeof n);
+  out.append(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(T));
+}
+
+// The attributes of a model, in file order.
+template <typename G>
+auto attributes(G& g) {
+  return std::array{&g.means, &g.log_scales, &g.quats, &g.opacity_logits, &g.sh_dc, &g.sh_rest};
+}
+constexpr const char* kAttributeNames[] = {"means", "log_scales", "quats", "opacity_logits", "sh_dc", "sh_rest"};
+
+struct BodyReader {
+  std::string_view bytes;  // the body alone
+  std::size_t pos = 0;
+  const fs::path& source;
+
+  template <typename T>
+  std::vector<T> array(const std::string& name) {
+    std::uint64_t n = 0;
+    if (bytes.size() - pos < sizeof n) fail_file(source, "damaged checkpoint: the body ends before array {}", name);
+    std::memcpy(&n, bytes.data() + pos, sizeof n);
+    pos += sizeof n;
+    if (n > (bytes.size() - pos) / sizeof(T))
+      fail_file(source, "damaged checkpoint: array {} claims {} values, more than the body holds", name, n);
+    std::vector<T> v(static_cast<std::size_t>(n));
+    if (n > 0) std::memcpy(v.data(), bytes.data() + pos, static_cast<std::size_t>(n) * sizeof(T));
+    pos += static_cast<std::size_t>(n) * sizeof(T);
+    return v;
+  }
+
+  Gaussians model(const std::string& name, int degree, std::size_t gaussians) {
+    Gaussians g;
+    g.sh_degree = degree;
+    const auto a = attributes(g);
+    for (std::size_t k = 0; k < a.size(); ++k) *a[k] = array<float>(name + "." + kAttributeNames[k]);
+    try {
+      g.validate();
+    } catch (const Error& e) {
+      fail_file(source, "damaged checkpoint: {}: {}", name, e.what());
+    }
+    if (g.size() != gaussians)
+      fail_file(source, "damaged checkpoint: {} has {} Gaussians, the header says {}", name, g.size(), gaussians);
+    return g;
+  }
+};
+
+std::string join(const std::vector<int>& v) { return fmt::format("[{}]", fmt::join(v, ", ")); }
+
+}  // namespace
+
+RunIdentity run_identity(const Scene& scene, const Split& split, const TrainConfig& config) {
+  RunIdentity r;
+  r.scene = absolute_path(scene.root.string());
+  r.scene_format = to_string(scene.format);
+  r.images_folder = scene.images_folder;
+  r.resolution = scene.resolution;
+  r.scene_images = static_cast<int>(scene.cameras.size());
+  r.train_views = split.train;
+  r.test_views = split.test;
+  for (int v : split.train) {
+    const Camera& c = scene.cameras.at(static_cast<std::size_t>(v));
+    r.train_images.push_back(c.image_name);
+    r.train_sizes.push_back({c.width, c.height});
+  }
+  to_json(r.options, config);
+  for (const char* key : kNotCompared) r.options.erase(key);
+  static const std::set<std::string> init_keywords = {"dense", "sparse", "random", "sfm-all-views"};
+  if (!init_keywords.count(config.init)) r.options["init"] = absolute_path(config.init);
+  if (!config.dafe_prior_dir.empty() && config.dafe_prior_dir != "stereo")
+    r.options["dafe_prior_dir"] = absolute_path(config.dafe_prior_dir);
+  return r;
+}
+
+std::string encode_checkpoint(const RunIdentity& run, const TrainingState& s) {
+  std::uint64_t body_bytes = 0;
+  for (const Gaussians* g : {&s.model, &s.exp_avg, &s.exp_avg_sq})
+    for (const auto* a : attributes(*g)) body_bytes += array_bytes(*a);
+  for (const auto* a : {&s.grad_sums, &s.grad_counts, &s.density_cache}) body_bytes += array_bytes(*a);
+  for (const auto& m : s.dafe_masks) body_bytes += array_bytes(m);
+
+  const json header = {
+      {"format", kCheckpointFormat},
+      {"body_bytes", body_bytes},
+      {"run", run_to_json(run)},
+      {"state",
+       {{"iteration", s.iteration},
+        {"iterations", s.iterations},
+        {"active_sh", s.active_sh},
+        {"adam_step", s.adam_step},
+        {"elapsed_s", s.elapsed_s},
+        {"camera_stack", s.camera_stack},
+        {"rng_cameras", rng_to_json(s.rng_cameras)},
+        {"rng_dropout", rng_to_json(s.rng_dropout)},
+        {"rng_densify", rng_to_json(s.rng_densify)},
+        {"gaussians", s.model.size()},
+        {"sh_degree", s.model.sh_degree},
+        {"dafe_masks", s.dafe_masks.size()}}}};
+  const std::string text = header.dump();
+  const std::string magic = fmt::format("{}{}\n", kMagicPrefix, kCheckpointFormat);
+  const std::uint64_t header_bytes = text.size();
+
+  std::string out;
+  out.reserve(magic.size() + sizeof header_bytes + text.size() + body_bytes + kCrcBytes);
+  out += magic;
+  out.append(reinterpret_cast<const char*>(&header_bytes), sizeof header_bytes);
+  out += text;
+  for (const Gaussians* g : {&s.model, &s.exp_avg, &s.exp_avg_sq})
+    for (const auto* a : attributes(*g)) put_array(out, *a);
+  for (const auto* a : {&s.grad_sums, &s.grad_counts, &s.density_cache}) put_array(out, *a);
+  for (const auto& m : s.dafe_masks) put_array(out, m);
+  const std::uint32_t crc = crc32(out);
+  out.append(reinterpret_cast<const char*>(&crc), sizeof crc);
+  return out;
+}
+
+Checkpoint decode_checkpoint(std::string_view bytes, const fs::path& source) {
+  // Magic and format: "D2GSCKPT<number>\n".
+  if (bytes.substr(0, kMagicPrefix.size()) != kMagicPrefix) fail_file(source, "not a d2gs checkpoint");
+  const std::size_t newline = bytes.find('\n', kMagicPrefix.size());
+  const std::string_view number = newline == std::string_view::npos || newline > kMagicPrefix.size() + 6
+                                      ? std::string_view{}
+                                      : bytes.substr(kMagicPrefix.size(), newline - kMagicPrefix.size());
+  if (number.empty() || !std::all_of(number.begin(), number.end(), [](char c) { return c >= '0' && c <= '9'; }))
+    fail_file(source, "not a d2gs checkpoint");
+  const int format = std::stoi(std::string(number));
+  if (format == 1)
+    fail_file(source, "checkpoint format 1 (written by d2gs before 2026-11-25) records neither the scene nor the split "
+                      "it was trained on, so a resume from it cannot be checked; train the run again");
+  if (format != kCheckpointFormat)
+    fail_file(source, "checkpoint format {} is not one this d2gs reads (format {})", format, kCheckpointFormat);
+
+  // Sizes, then the checksum over everything before it.
+  std::size_t pos = newline + 1;
+  std::uint64_t header_bytes = 0;
+  if (bytes.size() - pos < sizeof header_bytes)
+    fail_file(source, "truncated checkpoint ({} bytes, it ends inside its header)", bytes.size());
+  std::memcpy(&header_bytes, bytes.data() + pos, sizeof header_bytes);
+  pos += sizeof header_bytes;
+  if (header_bytes > bytes.size() - pos)
+    fail_file(source, "truncated checkpoint ({} bytes, it ends inside its header)", bytes.size());
+  json h;
+  try {
+    h = json::parse(bytes.substr(pos, static_cast<std::size_t>(header_bytes)));
+  } catch (const json::exception&) {
+    fail_file(source, "damaged checkpoint: its header is not valid JSON");
+  }
+  pos += static_cast<std::size_t>(header_bytes);
+  const json* body_field = h.is_object() && h.contains("body_bytes") ? &h["body_bytes"] : nullptr;
+  if (!body_field || !body_field->is_number_unsigned())
+    fail_file(source, "damaged checkpoint: its header has no body size");
+  const std::uint64_t body_bytes = body_field->get<std::uint64_t>();
+  const std::uint64_t available = bytes.size() - pos;
+  if (body_bytes > available || available - body_bytes < kCrcBytes)
+    fail_file(source, "truncated checkpoint ({} bytes of {})", bytes.size(),
+              body_bytes > std::uint64_t{1} << 62 ? std::string("more") : std::to_string(pos + body_bytes + kCrcBytes));
+  if (available - body_bytes > kCrcBytes)
+    fail_file(source, "damaged checkpoint: {} bytes after its end", available - body_bytes - kCrcBytes);
+  std::uint32_t stored = 0;
+  std::memcpy(&stored, bytes.data() + bytes.size() - kCrcBytes, kCrcBytes);
+  const std::uint32_t computed = crc32(bytes.substr(0, bytes.size() - kCrcBytes));
+  if (stored != computed)
+    fail_file(source, "damaged checkpoint: CRC-32 mismatch (stored {:08x}, computed {:08x})", stored, computed);
+
+  // The header's fields.
+  Checkpoint c;
+  TrainingState& s = c.state;
+  std::size_t gaussians = 0, masks = 0;
+  int sh_degree = 0;
+  try {
+    c.run = run_from_json(h.at("run"));
+    const json& st = h.at("state");
+    s.iteration = integer<int>(st.at("iteration"));
+    s.iterations = integer<int>(st.at("iterations"));
+    s.active_sh = integer<int>(st.at("active_sh"));
+    s.adam_step = integer<long>(st.at("adam_step"));
+    if (!st.at("elapsed_s").is_number()) throw std::invalid_argument("elapsed_s is not a number");
+    s.elapsed_s = st.at("elapsed_s").get<double>();
+    s.camera_stack = integers<int>(st.at("camera_stack"));
+    s.rng_cameras = rng_from_json(st.at("rng_cameras"));
+    s.rng_dropout = rng_from_json(st.at("rng_dropout"));
+    s.rng_densify = rng_from_json(st.at("rng_densify"));
+    gaussians = integer<std::size_t>(st.at("gaussians"));
+    sh_degree = integer<int>(st.at("sh_degree"));
+    masks = integer<std::size_t>(st.at("dafe_masks"));
+  } catch (const std::exception& e) {
+    fail_file(source, "damaged checkpoint header ({})", e.what());
+  }
+  if (s.iteration < 0 || s.iterations < 1 || s.adam_step < 0 || sh_degree < 0 || sh_degree > kMaxShDegree ||
+      s.active_sh < 0 || s.active_sh > sh_degree)
+    fail_file(source, "damaged checkpoint: impossible state (iteration {}, --iterations {}, SH degree {} of {})", s.iteration,
+              s.iterations, s.active_sh, sh_degree);
+
+  // The arrays.
+  BodyReader r{bytes.substr(pos, static_cast<std::size_t>(body_bytes)), 0, source};
+  s.model = r.model("model", sh_degree, gaussians);
+  s.exp_avg = r.model("exp_avg", sh_degree, gaussians);
+  s.exp_avg_sq = r.model("exp_avg_sq", sh_degree, gaussians);
+  s.grad_sums = r.array<float>("grad_sums");
+  s.grad_counts = r.array<float>("grad_counts");
+  if (s.grad_sums.size() != gaussians || s.grad_counts.size() != gaussians)
+    fail_file(source, "damaged checkpoint: the densification statistics do not have one value per Gaussian");
+  s.density_cache = r.array<float>("density_cache");
+  if (masks > r.bytes.size()) fail_file(source, "damaged checkpoint: {} DAFE masks claimed", masks);
+  for (std::size_t k = 0; k < masks; ++k) s.dafe_masks.push_back(r.array<std::uint8_t>(fmt::format("dafe_masks[{}]", k)));
+  if (r.pos != r.bytes.size())
+    fail_file(source, "damaged checkpoint: {} body bytes left over after the last array", r.bytes.size() - r.pos);
+  return c;
+}
+
+void write_checkpoint(const fs::path& path, const RunIdentity& run, const TrainingState& state) {
+  write_file_atomic(path, encode_checkpoint(run, state));
+}
+
+Checkpoint read_checkpoint(const fs::path& path) { return decode_checkpoint(read_file(path), path); }
+
+std::vector<std::pair<int, fs::path>> checkpoints_in(const fs::path& dir) {
+  static const std::regex name("chkpnt([0-9]{1,9})\\.bin");
+  std::vector<std::pair<int, fs::path>> found;
+  std::error_code ec;
+  for (const auto& e : fs::directory_iterator(dir, ec)) {
+    std::smatch m;
+    const std::string file = e.path().filename().string();
+    if (e.is_regular_file(ec) && std::regex_match(file, m, name)) found.emplace_back(std::stoi(m[1].str()), e.path());
+  }
+  std::sort(found.begin(), found.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+  return found;
+}
+
+std::string check_resume(const fs::path& source, const Checkpoint& checkpoint, const RunIdentity& run, int iterations) {
+  const RunIdentity& was = checkpoint.run;
+  const TrainingState& s = checkpoint.state;
+  const auto refuse = [&source]<typename... Args>(fmt::format_string<Args...> why, Args&&... args) {
+    fail_file(source, "cannot resume: {}", fmt::format(why, std::forward<Args>(args)...));
+  };
+  if (was.scene != run.scene) refuse("it was trained on scene {}, this run reads {}", was.scene, run.scene);
+  if (was.scene_format != run.scene_format)
+    refuse("it was trained on a {} scene, this run reads a {} scene", was.scene_format, run.scene_format);
+  if (was.resolution != run.resolution)
+    refuse("it was trained at -r {}, this run uses -r {}", was.resolution, run.resolution);
+  if (was.images_folder != run.images_folder)
+    refuse("it was trained on the images of {}/, this run reads {}/", was.images_folder, run.images_folder);
+  if (was.scene_images != run.scene_images)
+    refuse("the scene had {} images when it was written, it has {} now", was.scene_images, run.scene_images);
+  if (was.train_views != run.train_views)
+    refuse("it was trained on views {}, this run's training views are {}", join(was.train_views), join(run.train_views));
+  for (std::size_t k = 0; k < was.train_views.size(); ++k) {
+    if (was.train_images[k] != run.train_images[k])
+      refuse("training view {} was {}, it is {} now", was.train_views[k], was.train_images[k], run.train_images[k]);
+    if (was.train_sizes[k] != run.train_sizes[k])
+      refuse("training view {} ({}) was {}×{}, it is {}×{} now", was.train_views[k], run.train_images[k],
+             was.train_sizes[k][0], was.train_sizes[k][1], run.train_sizes[k][0], run.train_sizes[k][1]);
+  }
+  if (was.test_views != run.test_views)
+    refuse("its test views were {}, this run's are {}", join(was.test_views), join(run.test_views));
+  // The options: the method, seed and SH degree first, then the others by name.
+  std::vector<std::string> keys = {"method", "seed", "sh_degree"};
+  std::set<std::string> rest;
+  for (const auto& [key, value] : was.options.items()) rest.insert(key);
+  for (const auto& [key, value] : run.options.items()) rest.insert(key);
+  for (const auto& k : keys) rest.erase(k);
+  keys.insert(keys.end(), rest.begin(), rest.end());
+  for (const auto& key : keys) {
+    const bool in_was = was.options.contains(key), in_run = run.options.contains(key);
+    if (in_was && in_run && was.options.at(key) == run.options.at(key)) continue;
+    if (!in_was && !in_run) continue;
+    refuse("it was trained with {} = {}, this run has {}", key, in_was ? was.options.at(key).dump() : "(no such option)",
+           in_run ? run.options.at(key).dump() : "(no such option)");
+  }
+  // How far to train.
+  if (iterations < s.iteration)
+    refuse("it is at iteration {}, beyond --iterations {}; resume with --iterations {} or more", s.iteration, iterations,
+           s.iteration);
+  if (iterations == s.iteration && s.iterations != iterations)
+    refuse("it is iteration {} of a {}-iteration run, whose model differs from the last one of a {}-iteration run "
+           "(the last iteration takes no optimiser step); resume with --iterations above {}",
+           s.iteration, s.iterations, iterations, s.iteration);
+  // The state against the run (equal identities make these hold for any file d2gs wrote).
+  const std::size_t views = run.train_views.size();
+  std::vector<bool> queued(views, false);
+  for (int v : s.camera_stack) {
+    if (v < 0 || static_cast<std::size_t>(v) >= views || queued[static_cast<std::size_t>(v)])
+      refuse("its camera queue names training view position {} of {}", v, views);
+    queued[static_cast<std::size_t>(v)] = true;
+  }
+  if (!s.dafe_masks.empty() && s.dafe_masks.size() != views)
+    refuse("it holds {} DAFE masks for {} training views", s.dafe_masks.size(), views);
+  for (std::size_t k = 0; k < s.dafe_masks.size(); ++k) {
+    const std::size_t pixels = static_cast<std::size_t>(run.train_sizes[k][0]) * static_cast<std::size_t>(run.train_sizes[k][1]);
+    if (!s.dafe_masks[k].empty() && s.dafe_masks[k].size() != pixels)
+      refuse("its DAFE mask of training view {} has {} pixels, the view {}", run.train_views[k], s.dafe_masks[k].size(), pixels);
+  }
+  if (run.options.contains("sh_degree") && run.options.at("sh_degree") != s.model.sh_degree)
+    refuse("its model has SH degree {}, this run trains degree {}", s.model.sh_degree, run.options.at("sh_degree").dump());
+  if (iterations != s.iterations)
+    return fmt::format("{}: resuming a {}-iteration run to {} iterations: the learning-rate and drop-rate schedules "
+                       "change from iteration {} on, so the model is not that of an uninterrupted {}-iteration run",
+                       source.string(), s.iterations, iterations, s.iteration + 1, iterations);
+  return {};
+}
+
+}  // namespace d2gs

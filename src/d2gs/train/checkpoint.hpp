@@ -1,0 +1,84 @@
+#pragma once
+// Training checkpoints (chkpntN.bin, format 2): the whole state of a run after an iteration, so that
+// `--resume` continues it bit-identically, and what the run was trained on (scene, resolution, split,
+// image names and sizes, every option that changes the training), so that a resume refuses anything else
+// with one line naming the checkpoint and the first difference. A CRC-32 over the file finds damage.
+// Layout and rules: docs/formats.md, "Checkpoints".
+#include <array>
+#include <cstdint>
+#include <filesystem>
+#include <string>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "d2gs/core/random.hpp"
+#include "d2gs/model/gaussians.hpp"
+#include "d2gs/scene/scene.hpp"
+#include "d2gs/scene/split.hpp"
+#include "d2gs/train/config.hpp"
+
+namespace d2gs {
+
+inline constexpr int kCheckpointFormat = 2;
+
+// What a run trains on. A checkpoint continues only a run with an equal identity.
+struct RunIdentity {
+  std::string scene;                          // the scene folder, absolute and canonical
+  std::string scene_format;                   // colmap | llff | blender
+  std::string images_folder;                  // the folder the images are read from, e.g. "images_8"
+  int resolution = 1;                         // -r
+  int scene_images = 0;                       // images in the scene
+  std::vector<int> train_views, test_views;   // the split (global indices)
+  std::vector<std::string> train_images;      // image names of the training views, in split order
+  std::vector<std::array<int, 2>> train_sizes;  // width, height of each training view at -r
+  // Every option that changes the training (config.json keys), paths made absolute. Left out: those
+  // resolved above (source, resolution, n_views, train_views, test_views), --iterations (checked on its
+  // own) and the output-only ones (model_dir, save/checkpoint/test iterations, log_every, quiet).
+  nlohmann::json options = nlohmann::json::object();
+};
+
+RunIdentity run_identity(const Scene& scene, const Split& split, const TrainConfig& config);
+
+// The state of a run after iteration `iteration`: everything the next iteration reads.
+struct TrainingState {
+  int iteration = 0;
+  int iterations = 0;  // the run's --iterations when the checkpoint was written
+  int active_sh = 0;
+  long adam_step = 0;
+  double elapsed_s = 0;
+  std::vector<int> camera_stack;  // positions in the training views still to visit this epoch
+  Rng::State rng_cameras{}, rng_dropout{}, rng_densify{};
+  Gaussians model, exp_avg, exp_avg_sq;  // the model and its two Adam moments
+  std::vector<float> grad_sums, grad_counts;  // densification statistics, one per Gaussian
+  std::vector<float> density_cache;          // D²GS density scores (out of step with the model in the release mode)
+  std::vector<std::vector<std::uint8_t>> dafe_masks;  // D²GS far-region mask per training view (empty: none yet)
+};
+
+struct Checkpoint {
+  RunIdentity run;
+  TrainingState state;
+};
+
+// The file's bytes, and back. decode_checkpoint checks the magic and format, the size, the CRC-32 and
+// the shape of every array, and throws d2gs::Error "<source>: <problem>" on the first failure.
+std::string encode_checkpoint(const RunIdentity& run, const TrainingState& state);
+Checkpoint decode_checkpoint(std::string_view bytes, const std::filesystem::path& source);
+// Written atomically.
+void write_checkpoint(const std::filesystem::path& path, const RunIdentity& run, const TrainingState& state);
+Checkpoint read_checkpoint(const std::filesystem::path& path);
+
+// The chkpntN.bin files in `dir`, highest N first.
+std::vector<std::pair<int, std::filesystem::path>> checkpoints_in(const std::filesystem::path& dir);
+
+// Throws d2gs::Error "<source>: cannot resume: <first difference>" unless `checkpoint` continues the run
+// `run` trained to `iterations`: equal identities, `iterations` beyond the checkpoint's iteration (or equal
+// to it when the checkpoint is the last iteration of a run of that length), and a state that fits the
+// run (camera queue, DAFE masks). Returns a warning for a resume that is allowed but not an exact
+// continuation (another --iterations than the checkpointed run's), else an empty string.
+std::string check_resume(const std::filesystem::path& source, const Checkpoint& checkpoint, const RunIdentity& run,
+                         int iterations);
+
+}  // namespace d2gs
