@@ -43,6 +43,9 @@ Run add_init_command(CLI::App& app) {
       "Writes DIR/sparse/points3D.ply, DIR/dense/fused.ply, DIR/depth/NAME.npy (float32 H×W camera-space depth,\n"
       "0 = invalid; usable as `d2gs train --dafe-prior DIR/depth --dafe-prior-kind depth`), DIR/depth/NAME_valid.png\n"
       "and DIR/init.json, with DIR = SCENE/{N}_views unless -o is given. Only the training views are read.\n"
+      "--dense-method patchmatch: PatchMatch multi-view stereo (COLMAP-like, on the CPU) and fusion of the depth\n"
+      "and normal maps, at the highest resolution of the scene folder (depth maps at that size; fused.ply with\n"
+      "normals); SGBM (default) runs at the training resolution.\n"
       "Example: d2gs init -s ../shared/data/nerf_llff_data/fern --n-views 3 -r 8 -o out/fern_init");
   auto o = std::make_shared<InitOptions>();
   cmd->add_option("-s,--source", o->source, "Scene folder (COLMAP, LLFF or Blender)")->required();
@@ -172,6 +175,7 @@ Run add_init_command(CLI::App& app) {
                      {"points", cloud.size()}};
       };
       report("sparse", geo.sparse);
+      if (!compare.empty()) report("compared", compare);
       if (g.dense) {
         report("dense", geo.dense);
         // Depth maps: relative error of the stereo depth at the pixels where oracle points project.

@@ -43,8 +43,10 @@ struct PatchMatchOptions {
   // coarsest level starts from random planes and runs `iterations` exploring iterations (each a red and
   // a black half-sweep over 8 neighbour regions, refinement and a random plane); every finer level
   // starts from the coarser planes and runs `fine_iterations` refining ones (4 nearest regions and
-  // perturbations); then `geometric_iterations` of the geometric stage at full size. The perturbation
-  // halves every iteration (COLMAP's schedule).
+  // perturbations); then `geometric_iterations` refining ones of the geometric stage at full size. The
+  // perturbation halves every iteration (COLMAP's schedule). (Letting the geometric iterations replace
+  // the full-size photometric one saves a quarter of the time but doubled the synthetic scene's median
+  // disparity error, 0.18 → 0.30 px.)
   int levels = 2;
   int iterations = 3;
   int fine_iterations = 1;
