@@ -8,7 +8,6 @@
 #include <algorithm>
 #include <cmath>
 #include <set>
-#include <unistd.h>
 
 #include <fmt/format.h>
 
@@ -20,25 +19,14 @@
 #include "d2gs/geometry/training_geometry.hpp"
 #include "d2gs/scene/split.hpp"
 #include "d2gs/scene/synthetic_scene.hpp"
+#include "synthetic_fixture.hpp"
 #include "test_paths.hpp"
 
 namespace d2gs {
 namespace {
 namespace fs = std::filesystem;
 
-SyntheticSceneOptions small_scene() {
-  SyntheticSceneOptions o;
-  o.width = 252;
-  o.height = 189;
-  o.supersample = 2;
-  o.seed = 3;
-  return o;
-}
-
-const SyntheticScene& scene() {
-  static const SyntheticScene s(small_scene());
-  return s;
-}
+const SyntheticScene& scene() { return test::small_synthetic_scene(); }
 
 glm::dvec2 project(const Camera& c, const glm::dvec3& X) {
   const glm::dvec3 q = c.R_world_to_cam * X + c.t_world_to_cam;
@@ -364,36 +352,11 @@ TEST(PatchMatch, BadInputsGiveOneLineErrors) {
   expect_error([&] { (void)patch_match_stereo(v.cam_ptrs(), v.image_ptrs(), v.ranges, bad); }, "window radius");
 }
 
-// The whole pipeline with PatchMatch on the synthetic scene written as an LLFF folder.
-const fs::path& synthetic_dir() {
-  struct Shared {
-    fs::path dir = fs::temp_directory_path() / "d2gs-tests" / fmt::format("patch-match-synthetic-{}", ::getpid());
-    Shared() {
-      fs::remove_all(dir);
-      write_synthetic_scene(dir, small_scene());
-    }
-    ~Shared() {
-      std::error_code ec;
-      fs::remove_all(dir, ec);
-    }
-  };
-  static const Shared shared;
-  return shared.dir;
-}
-
-struct ImageReads {
-  std::vector<fs::path> paths;
-  ImageReads() {
-    set_image_read_observer([this](const fs::path& p) { paths.push_back(p); });
-  }
-  ~ImageReads() { set_image_read_observer(nullptr); }
-};
-
 TEST(TrainingGeometry, PatchMatchPipelineReadsOnlyTrainingViewsAndLiesOnTheSurfaces) {
   // Trained at half resolution; PatchMatch runs at the folder's full resolution (images/, 252x189).
   SceneLoadOptions lo;
   lo.resolution = 2;
-  const Scene s = load_scene(synthetic_dir(), lo);
+  const Scene s = load_scene(test::small_synthetic_dir(), lo);
   SplitOptions so;
   so.n_views = 3;
   const Split split = make_split(s, so);
@@ -403,17 +366,17 @@ TEST(TrainingGeometry, PatchMatchPipelineReadsOnlyTrainingViewsAndLiesOnTheSurfa
   TrainingGeometry g;
   std::set<fs::path> read;
   {
-    ImageReads reads;
+    test::ImageReads reads;
     g = build_training_geometry(s, split.train, o);
     read.insert(reads.paths.begin(), reads.paths.end());
     EXPECT_EQ(reads.paths.size(), 3u);
   }
   std::set<fs::path> train;
-  for (int v : split.train) train.insert(synthetic_dir() / "images" / s.cameras[static_cast<std::size_t>(v)].image_name);
+  for (int v : split.train) train.insert(test::small_synthetic_dir() / "images" / s.cameras[static_cast<std::size_t>(v)].image_name);
   std::set<fs::path> read_names;
-  for (const auto& p : read) read_names.insert(synthetic_dir() / "images" / p.filename());
+  for (const auto& p : read) read_names.insert(test::small_synthetic_dir() / "images" / p.filename());
   EXPECT_EQ(read_names, train);
-  for (int v : split.test) EXPECT_EQ(read_names.count(synthetic_dir() / "images" / s.cameras[static_cast<std::size_t>(v)].image_name), 0u);
+  for (int v : split.test) EXPECT_EQ(read_names.count(test::small_synthetic_dir() / "images" / s.cameras[static_cast<std::size_t>(v)].image_name), 0u);
   EXPECT_EQ(g.geometry_resolution, 1);
   ASSERT_EQ(g.depth.size(), 3u);
   EXPECT_EQ(g.depth[0].width, 252);
