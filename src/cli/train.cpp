@@ -62,6 +62,11 @@ Run add_train_command(CLI::App& app) {
       "Initial points: 'dense' (default: stereo depth of the training views fused, as `d2gs init`; reuses "
       "SCENE/{N}_views or MODEL/init), 'sparse' (SIFT points triangulated from the training views), a PLY file, "
       "'random', or 'sfm-all-views' (the dataset's points3D: an ORACLE, it saw the test views)");
+  opt("--init-dense-method", d.init_dense_method, "init_dense_method",
+      "Stereo of --init dense (and of --dafe-prior stereo): 'sgbm' (default: rectified SGBM at the training "
+      "resolution) or 'patchmatch' (PatchMatch multi-view stereo at the highest resolution of the scene folder, "
+      "as `d2gs init --dense-method patchmatch`)")
+      ->check(CLI::IsMember({"sgbm", "patchmatch"}));
   opt("--random-points", d.random_points, "random_points", "Point count of --init random (random pixel rays of the training views, uniform inverse depth within the scene's depth bounds: docs/training.md)");
   opt("--position-lr", d.lr.means, "position_lr", "Initial position learning rate (× scene extent)");
   opt("--position-lr-final", d.position_lr_final, "position_lr_final", "Final position learning rate (× extent)");

@@ -69,6 +69,8 @@ void TrainConfig::validate() const {
     fail("option -r must be 1, 2, 4 or 8 (got {})", resolution);
   if (n_views < 0) fail("option --n-views must be ≥ 0 (got {})", n_views);
   positive(iterations, "--iterations");
+  if (init_dense_method != "sgbm" && init_dense_method != "patchmatch")
+    fail("option --init-dense-method must be 'sgbm' or 'patchmatch' (got '{}')", init_dense_method);
   positive(lr.means, "--position-lr");
   positive(position_lr_final, "--position-lr-final");
   positive(lr.sh_dc, "--sh-dc-lr");
@@ -132,7 +134,7 @@ void to_json(nlohmann::json& j, const TrainConfig& c) {
       {"source", c.source}, {"model_dir", c.model_dir}, {"resolution", c.resolution}, {"n_views", c.n_views},
       {"train_views", c.train_views}, {"test_views", c.test_views}, {"white_background", c.white_background},
       {"image_source", to_string(c.image_source)}, {"method", to_string(c.method)}, {"iterations", c.iterations}, {"seed", c.seed}, {"init", c.init},
-      {"random_points", c.random_points},
+      {"init_dense_method", c.init_dense_method}, {"random_points", c.random_points},
       {"position_lr", c.lr.means}, {"position_lr_final", c.position_lr_final}, {"sh_dc_lr", c.lr.sh_dc},
       {"sh_rest_lr", c.lr.sh_rest}, {"opacity_lr", c.lr.opacity}, {"scaling_lr", c.lr.scales},
       {"rotation_lr", c.lr.quats}, {"lambda_dssim", c.lambda_dssim},
@@ -184,6 +186,7 @@ void update_from_json(TrainConfig& c, const nlohmann::json& j) {
     read(k, "iterations", c.iterations);
     read(k, "seed", c.seed);
     read(k, "init", c.init);
+    read(k, "init_dense_method", c.init_dense_method);
     read(k, "random_points", c.random_points);
     read(k, "position_lr", c.lr.means);
     read(k, "position_lr_final", c.position_lr_final);

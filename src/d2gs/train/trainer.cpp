@@ -195,10 +195,14 @@ void load_dafe_priors(Trainer::State& s) {
     const int h = static_cast<int>(a.shape[0]), w = static_cast<int>(a.shape[1]);
     Image prior(w, h, 1);
     for (std::size_t i = 0; i < a.values.size(); ++i) prior.pixels[i] = static_cast<float>(a.values[i]);
-    if (w != cam.width || h != cam.height) prior = resize_area(prior, cam.width, cam.height);
-    // Depth priors mark pixels without a depth by 0 (d2gs init's stereo depth maps): never far.
+    // Depth priors mark pixels without a depth by 0 (d2gs init's stereo depth maps): never far, and never
+    // averaged into the valid depths when the map is resized (PatchMatch's maps are at the scene folder's
+    // highest resolution).
+    const bool depth = cfg.dafe_prior_kind == PriorKind::Depth;
+    if (w != cam.width || h != cam.height) prior = depth ? resize_area_nonzero(prior, cam.width, cam.height)
+                                                         : resize_area(prior, cam.width, cam.height);
     std::vector<std::uint8_t> valid(prior.pixels.size(), 1);
-    if (cfg.dafe_prior_kind == PriorKind::Depth)
+    if (depth)
       for (std::size_t i = 0; i < valid.size(); ++i) valid[i] = prior.pixels[i] > 0.0f;
     s.dafe_masks[k] = dafe_mask(prior.pixels, cfg.dafe_prior_kind, cfg.dafe_mask_rule, cfg.dafe_tau, &valid);
   }
@@ -298,6 +302,7 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
   const auto training_geometry = [&s]() {
     TrainingGeometryOptions go;
     go.seed = s.cfg.seed;
+    go.dense_method = parse_dense_method(s.cfg.init_dense_method);
     return obtain_training_geometry(s.scene, s.split.train, go,
                                     {training_geometry_dir(s.scene, s.split.train.size()), s.out() / "init"},
                                     s.out() / "init");
