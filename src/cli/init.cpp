@@ -103,6 +103,11 @@ Run add_init_command(CLI::App& app) {
   cmd->add_option("--pm-min-consistent", pm.filter_min_consistent,
                   "PatchMatch: source views that must agree for a depth to be kept (0: no filter)")
       ->capture_default_str();
+  cmd->add_option("--pm-filter-min-angle", pm.filter_min_triangulation_angle_deg,
+                  "PatchMatch: smallest triangulation angle (degrees) of a source that confirms a depth (COLMAP's "
+                  "filter_min_triangulation_angle; 0: any angle, as COLMAP before its fix of 2026-02 effectively "
+                  "filtered)")
+      ->capture_default_str();
   cmd->add_option("--fusion-min-pixels", o->geometry.patch_match_fusion.min_pixels,
                   "PatchMatch fusion: pixels (across views) a fused point needs")
       ->capture_default_str();

@@ -350,6 +350,31 @@ TEST(PatchMatch, BadInputsGiveOneLineErrors) {
   PatchMatchOptions bad = quick_options();
   bad.window_radius = 30;
   expect_error([&] { (void)patch_match_stereo(v.cam_ptrs(), v.image_ptrs(), v.ranges, bad); }, "window radius");
+  bad = quick_options();
+  bad.filter_min_triangulation_angle_deg = -1.0;
+  expect_error([&] { (void)patch_match_stereo(v.cam_ptrs(), v.image_ptrs(), v.ranges, bad); },
+               "smallest triangulation angle must be in [0, 90) degrees, got -1");
+}
+
+// The filter's triangulation angle (d2gs init --pm-filter-min-angle): 0 keeps every depth the sources
+// confirm, a larger angle only removes depths, and an angle wider than the views' own rejects them all.
+TEST(PatchMatch, FilterAngleOnlyRemovesDepths) {
+  const auto& v = three_views();
+  const auto valid = [&](double angle) {
+    PatchMatchOptions o = quick_options();
+    o.levels = 1, o.iterations = 1, o.fine_iterations = 0, o.geometric_iterations = 0;  // the filter is what counts
+    o.filter_min_triangulation_angle_deg = angle;
+    std::vector<std::size_t> counts;
+    for (const auto& m : patch_match_stereo(v.cam_ptrs(), v.image_ptrs(), v.ranges, o))
+      counts.push_back(m.depth.valid_count());
+    return counts;
+  };
+  const auto none = valid(0.0), some = valid(3.0), all = valid(89.0);
+  for (std::size_t i = 0; i < none.size(); ++i) {
+    EXPECT_GT(none[i], 0u) << i;
+    EXPECT_LE(some[i], none[i]) << i;
+    EXPECT_EQ(all[i], 0u) << i;
+  }
 }
 
 TEST(TrainingGeometry, PatchMatchPipelineReadsOnlyTrainingViewsAndLiesOnTheSurfaces) {
