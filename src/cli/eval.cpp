@@ -115,7 +115,7 @@ Run add_eval_command(CLI::App& app) {
     const EvalSummary summary = evaluate_views(model, scene, test, eo);
     nlohmann::json j;
     to_json(j, summary);
-    j["method"] = to_string(c.method);
+    j["method"] = c.method;
     j["iteration"] = it;
     j["gaussians"] = model.size();
     j["init_is_oracle"] = oracle;
@@ -124,7 +124,7 @@ Run add_eval_command(CLI::App& app) {
     write_file_atomic(run / "results.json", j.dump(2));
     if (*json_only) std::printf("%s\n", j.dump(2).c_str());
     else std::printf("%s(%s, iteration %d, %zu Gaussians%s)\nwritten %s\n", format_table(summary).c_str(),
-                     to_string(c.method), it, model.size(), oracle ? ", ORACLE init" : "", (run / "results.json").c_str());
+                     c.method.c_str(), it, model.size(), oracle ? ", ORACLE init" : "", (run / "results.json").c_str());
     report::write_run_report_or_warn(run);
     return 0;
   };

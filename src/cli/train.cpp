@@ -8,6 +8,7 @@
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/json_value.hpp"
 #include "d2gs/report/run_report.hpp"
+#include "d2gs/train/methods/registry.hpp"
 #include "d2gs/train/presets.hpp"
 #include "d2gs/train/trainer.hpp"
 
@@ -52,9 +53,13 @@ Run add_train_command(CLI::App& app) {
                                      "code does; training and ground truth)")
                          ->check(CLI::IsMember({"folder", "largest"})),
                      "image_source");
-  keys->emplace_back(cmd->add_option("--method", *method, "3dgs, dropgaussian or d2gs")
-                         ->check(CLI::IsMember({"3dgs", "dropgaussian", "d2gs"})),
-                     "method");
+  std::vector<std::string> method_names;
+  std::string method_help = "Training method:";
+  for (const MethodInfo& m : training_methods()) {
+    method_names.push_back(m.name);
+    method_help += fmt::format(" '{}' ({}){}", m.name, m.help, &m == &training_methods().back() ? "" : ",");
+  }
+  keys->emplace_back(cmd->add_option("--method", *method, method_help)->check(CLI::IsMember(method_names)), "method");
   opt("--iterations", d.iterations, "iterations", "Training iterations");
   opt("--seed", d.seed, "seed", "Seed of every random choice (same seed and input: same model)")
       ->check(not_negative());
@@ -101,7 +106,7 @@ Run add_train_command(CLI::App& app) {
   opt("--dd-rate-max", d.dd_drop.rate_max, "dd_rate_max", "D²GS: final drop rate");
   flag("--dd-compensate", d.dd_drop.compensate, "dd_compensate",
        "D²GS diagnostic: scale kept Gaussians' opacity by 1/(1 − p_i) as DropGaussian does (paper and release: no)");
-  opt("--dafe-prior", d.dafe_prior_dir, "dafe_prior_dir",
+  opt("--dafe-prior", d.dafe.prior, "dafe_prior_dir",
       "D²GS: folder of per-view prior maps NAME.npy, or 'stereo' (the depth maps of `d2gs init`, kind depth); "
       "default: the model's own depth at iteration 1000");
   auto prior_kind = std::make_shared<std::string>();
@@ -110,8 +115,8 @@ Run add_train_command(CLI::App& app) {
                                      "(0 = no value)")
                          ->check(CLI::IsMember({"depth", "disparity"})),
                      "dafe_prior_kind");
-  opt("--dafe-tau", d.dafe_tau, "dafe_tau", "D²GS: far-mask percentage (percentile rule)");
-  opt("--dafe-lambda", d.dafe_lambda, "dafe_lambda", "D²GS: DAFE loss weight");
+  opt("--dafe-tau", d.dafe.tau, "dafe_tau", "D²GS: far-mask percentage (percentile rule)");
+  opt("--dafe-lambda", d.dafe.lambda, "dafe_lambda", "D²GS: DAFE loss weight");
   opt("--save-iterations", d.save_iterations, "save_iterations", "Iterations whose model is saved (default: the last)")
       ->delimiter(',');
   opt("--checkpoint-iterations", d.checkpoint_iterations, "checkpoint_iterations",

@@ -31,7 +31,7 @@ TrainConfig small_run(const fs::path& out, int iterations) {
   c.model_dir = out.string();
   c.resolution = 8;
   c.n_views = 3;
-  c.method = Method::Gs3d;
+  c.method = "3dgs";
   c.iterations = iterations;
   c.quiet = true;
   c.seed = 1;
@@ -132,7 +132,7 @@ TEST(Resume, RefusesAnotherSceneResolutionSplitOrConfigurationAndLeavesTheRunAlo
          c.test_views = {0, 8};
        },
        "its test views were [0, 8, 16], this run's are [0, 8]"},
-      {"another method", [](TrainConfig& c) { c.method = Method::D2gs; },
+      {"another method", [](TrainConfig& c) { c.method = "d2gs"; },
        "it was trained with method = \"3dgs\", this run has \"d2gs\""},
       {"another seed", [](TrainConfig& c) { c.seed = 2; }, "it was trained with seed = 1, this run has 2"},
       {"another SH degree", [](TrainConfig& c) { c.sh_degree = 2; }, "it was trained with sh_degree = 3, this run has 2"},

@@ -11,6 +11,7 @@
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/json_value.hpp"
 #include "d2gs/train/config.hpp"
+#include "d2gs/train/methods/registry.hpp"
 #include "d2gs/train/presets.hpp"
 
 namespace d2gs::experiment {
@@ -142,7 +143,7 @@ ExperimentConfig parse_experiment_config(const nlohmann::json& j, const fs::path
     MethodSpec spec;
     spec.method = get<std::string>(m, "method", "", file, "a method");
     try {
-      method_from_string(spec.method);
+      check_method_name(spec.method);
     } catch (const Error& e) {
       fail_file(file, "{}", e.what());
     }
@@ -219,7 +220,7 @@ std::vector<RunSpec> expand_runs(const ExperimentConfig& config, const fs::path&
             c.model_dir = (root / r.dir).string();
             c.n_views = views;
             c.seed = seed;
-            c.method = method_from_string(m.method);
+            c.method = m.method;
             std::vector<int> checkpoints;
             for (int it = config.checkpoint_every; it < c.iterations; it += config.checkpoint_every)
               checkpoints.push_back(it);

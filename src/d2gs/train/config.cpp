@@ -11,24 +11,9 @@
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/json_value.hpp"
+#include "d2gs/train/methods/registry.hpp"
 
 namespace d2gs {
-
-const char* to_string(Method m) {
-  switch (m) {
-    case Method::Gs3d: return "3dgs";
-    case Method::DropGaussian: return "dropgaussian";
-    case Method::D2gs: return "d2gs";
-  }
-  return "?";
-}
-
-Method method_from_string(const std::string& s) {
-  if (s == "3dgs") return Method::Gs3d;
-  if (s == "dropgaussian") return Method::DropGaussian;
-  if (s == "d2gs") return Method::D2gs;
-  fail("unknown method '{}' (expected 3dgs, dropgaussian or d2gs)", s);
-}
 
 namespace {
 
@@ -65,6 +50,7 @@ void TrainConfig::validate() const {
   };
   if (source.empty()) fail("option --source (-s) is required");
   if (model_dir.empty()) fail("option --model-path (-m) is required");
+  check_method_name(method);
   if (resolution != 1 && resolution != 2 && resolution != 4 && resolution != 8)
     fail("option -r must be 1, 2, 4 or 8 (got {})", resolution);
   if (n_views < 0) fail("option --n-views must be ≥ 0 (got {})", n_views);
@@ -87,12 +73,12 @@ void TrainConfig::validate() const {
   if (!(d.rate_min >= 0 && d.rate_max <= 1 && d.rate_min <= d.rate_max))
     fail("options --dd-rate-min/--dd-rate-max must satisfy 0 ≤ min ≤ max ≤ 1 (got {}, {})", d.rate_min, d.rate_max);
   if (!(d.weight_depth >= 0 && d.weight_density >= 0)) fail("DD-Drop weights must be ≥ 0");
-  positive(density_refresh_every, "--density-refresh-every");
-  if (dafe_mask_rule == DafeMaskRule::Percentile && !(dafe_tau >= 0 && dafe_tau <= 100))
-    fail("option --dafe-tau must be a percentage in [0, 100] for the percentile rule (got {})", dafe_tau);
-  if (dafe_mask_rule == DafeMaskRule::Threshold && !(dafe_tau >= 0 && dafe_tau <= 1))
-    fail("option --dafe-tau must be a fraction in [0, 1] for the threshold rule (got {})", dafe_tau);
-  if (!(dafe_lambda >= 0)) fail("option --dafe-lambda must be ≥ 0");
+  positive(d.density_refresh_every, "--density-refresh-every");
+  if (dafe.mask_rule == DafeMaskRule::Percentile && !(dafe.tau >= 0 && dafe.tau <= 100))
+    fail("option --dafe-tau must be a percentage in [0, 100] for the percentile rule (got {})", dafe.tau);
+  if (dafe.mask_rule == DafeMaskRule::Threshold && !(dafe.tau >= 0 && dafe.tau <= 1))
+    fail("option --dafe-tau must be a fraction in [0, 1] for the threshold rule (got {})", dafe.tau);
+  if (!(dafe.lambda >= 0)) fail("option --dafe-lambda must be ≥ 0");
   positive(random_points, "--random-points");
   if (init != "dense" && init != "sparse" && init != "random" && init != "sfm-all-views") {
     std::error_code ec;
@@ -131,7 +117,7 @@ void to_json(nlohmann::json& j, const TrainConfig& c) {
   j = nlohmann::json{
       {"source", c.source}, {"model_dir", c.model_dir}, {"resolution", c.resolution}, {"n_views", c.n_views},
       {"train_views", c.train_views}, {"test_views", c.test_views}, {"white_background", c.white_background},
-      {"image_source", to_string(c.image_source)}, {"method", to_string(c.method)}, {"iterations", c.iterations}, {"seed", c.seed}, {"init", c.init},
+      {"image_source", to_string(c.image_source)}, {"method", c.method}, {"iterations", c.iterations}, {"seed", c.seed}, {"init", c.init},
       {"random_points", c.random_points},
       {"position_lr", c.lr.means}, {"position_lr_final", c.position_lr_final}, {"sh_dc_lr", c.lr.sh_dc},
       {"sh_rest_lr", c.lr.sh_rest}, {"opacity_lr", c.lr.opacity}, {"scaling_lr", c.lr.scales},
@@ -149,10 +135,11 @@ void to_json(nlohmann::json& j, const TrainConfig& c) {
       {"dd_compensate", c.dd_drop.compensate},
       {"dd_lambda_near", c.dd_drop.lambda_near}, {"dd_lambda_middle", c.dd_drop.lambda_middle},
       {"dd_lambda_far", c.dd_drop.lambda_far}, {"dd_depth_mode", to_string(c.dd_drop.depth_mode)},
-      {"density_refresh_every", c.density_refresh_every}, {"release_density_cache", c.release_density_cache},
-      {"dafe", c.dafe}, {"dafe_prior_dir", c.dafe_prior_dir}, {"dafe_prior_kind", to_string(c.dafe_prior_kind)},
-      {"dafe_mask_rule", to_string(c.dafe_mask_rule)}, {"dafe_tau", c.dafe_tau},
-      {"dafe_loss_form", to_string(c.dafe_loss_form)}, {"dafe_lambda", c.dafe_lambda},
+      {"density_refresh_every", c.dd_drop.density_refresh_every},
+      {"release_density_cache", c.dd_drop.release_density_cache}, {"dafe", c.dafe.enabled},
+      {"dafe_prior_dir", c.dafe.prior}, {"dafe_prior_kind", to_string(c.dafe.prior_kind)},
+      {"dafe_mask_rule", to_string(c.dafe.mask_rule)}, {"dafe_tau", c.dafe.tau},
+      {"dafe_loss_form", to_string(c.dafe.loss_form)}, {"dafe_lambda", c.dafe.lambda},
       {"save_iterations", c.save_iterations}, {"checkpoint_iterations", c.checkpoint_iterations},
       {"test_iterations", c.test_iterations}, {"log_every", c.log_every}, {"quiet", c.quiet}};
 }
@@ -180,7 +167,8 @@ void update_from_json(TrainConfig& c, const nlohmann::json& j) {
     read(k, "test_views", c.test_views);
     read(k, "white_background", c.white_background);
     c.image_source = enum_from<ImageSource>(k["image_source"], {{"folder", ImageSource::Folder}, {"largest", ImageSource::Largest}}, "image_source");
-    c.method = method_from_string(k["method"]);
+    read(k, "method", c.method);
+    check_method_name(c.method);
     read(k, "iterations", c.iterations);
     read(k, "seed", c.seed);
     read(k, "init", c.init);
@@ -219,15 +207,15 @@ void update_from_json(TrainConfig& c, const nlohmann::json& j) {
     read(k, "dd_lambda_middle", c.dd_drop.lambda_middle);
     read(k, "dd_lambda_far", c.dd_drop.lambda_far);
     c.dd_drop.depth_mode = enum_from<DepthMode>(k["dd_depth_mode"], {{"euclidean", DepthMode::Euclidean}, {"release-dot", DepthMode::ReleaseDot}}, "dd_depth_mode");
-    read(k, "density_refresh_every", c.density_refresh_every);
-    read(k, "release_density_cache", c.release_density_cache);
-    read(k, "dafe", c.dafe);
-    read(k, "dafe_prior_dir", c.dafe_prior_dir);
-    c.dafe_prior_kind = enum_from<PriorKind>(k["dafe_prior_kind"], {{"depth", PriorKind::Depth}, {"disparity", PriorKind::Disparity}}, "dafe_prior_kind");
-    c.dafe_mask_rule = enum_from<DafeMaskRule>(k["dafe_mask_rule"], {{"percentile", DafeMaskRule::Percentile}, {"threshold", DafeMaskRule::Threshold}}, "dafe_mask_rule");
-    read(k, "dafe_tau", c.dafe_tau);
-    c.dafe_loss_form = enum_from<DafeLossForm>(k["dafe_loss_form"], {{"paper", DafeLossForm::Paper}, {"release", DafeLossForm::Release}}, "dafe_loss_form");
-    read(k, "dafe_lambda", c.dafe_lambda);
+    read(k, "density_refresh_every", c.dd_drop.density_refresh_every);
+    read(k, "release_density_cache", c.dd_drop.release_density_cache);
+    read(k, "dafe", c.dafe.enabled);
+    read(k, "dafe_prior_dir", c.dafe.prior);
+    c.dafe.prior_kind = enum_from<PriorKind>(k["dafe_prior_kind"], {{"depth", PriorKind::Depth}, {"disparity", PriorKind::Disparity}}, "dafe_prior_kind");
+    c.dafe.mask_rule = enum_from<DafeMaskRule>(k["dafe_mask_rule"], {{"percentile", DafeMaskRule::Percentile}, {"threshold", DafeMaskRule::Threshold}}, "dafe_mask_rule");
+    read(k, "dafe_tau", c.dafe.tau);
+    c.dafe.loss_form = enum_from<DafeLossForm>(k["dafe_loss_form"], {{"paper", DafeLossForm::Paper}, {"release", DafeLossForm::Release}}, "dafe_loss_form");
+    read(k, "dafe_lambda", c.dafe.lambda);
     read(k, "save_iterations", c.save_iterations);
     read(k, "checkpoint_iterations", c.checkpoint_iterations);
     read(k, "test_iterations", c.test_iterations);

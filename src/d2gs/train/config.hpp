@@ -17,10 +17,6 @@
 
 namespace d2gs {
 
-enum class Method { Gs3d, DropGaussian, D2gs };
-const char* to_string(Method m);
-Method method_from_string(const std::string& s);  // "3dgs" | "dropgaussian" | "d2gs"
-
 struct TrainConfig {
   // data
   std::string source;                 // -s
@@ -34,7 +30,7 @@ struct TrainConfig {
   ImageSource image_source = ImageSource::Folder;
 
   // method
-  Method method = Method::Gs3d;
+  std::string method = "3dgs";  // a name of train/methods/registry.cpp: 3dgs, dropgaussian, d2gs
   int iterations = 10000;
   std::uint64_t seed = 0;
 
@@ -68,16 +64,9 @@ struct TrainConfig {
   // D²GS preset"); --preset paper switches to the paper's formulas and constants.
   std::string preset;        // "paper", "release" or empty (= the defaults, i.e. the release's values)
   std::string scene_preset;  // e.g. "llff/fern", or empty
-  DdDropOptions dd_drop = {.weight_depth = 0.3, .weight_density = 0.7, .depth_mode = DepthMode::ReleaseDot};
-  int density_refresh_every = 500;
-  bool release_density_cache = true;  // the release's quirk (see method.md §4)
-  bool dafe = true;
-  std::string dafe_prior_dir;          // folder of per-view depth/disparity maps; "stereo": the init's depths
-  PriorKind dafe_prior_kind = PriorKind::Disparity;
-  DafeMaskRule dafe_mask_rule = DafeMaskRule::Percentile;
-  double dafe_tau = 5.0;               // percent (percentile rule) or fraction (threshold rule)
-  DafeLossForm dafe_loss_form = DafeLossForm::Release;
-  float dafe_lambda = 1.0f;
+  DdDropOptions dd_drop = {.weight_depth = 0.3, .weight_density = 0.7, .depth_mode = DepthMode::ReleaseDot,
+                           .release_density_cache = true};
+  DafeOptions dafe;
 
   // outputs
   std::vector<int> save_iterations;        // empty = the last iteration only
