@@ -89,8 +89,7 @@ Run add_eval_command(CLI::App& app) {
       if (cj.contains("init_is_oracle") && !cj["init_is_oracle"].is_boolean())
         fail("key 'init_is_oracle' must be true or false");
       oracle = cj.value("init_is_oracle", false);
-      for (const char* recorded : {"init_is_oracle", "scene_extent", "split", "images_folder"}) cj.erase(recorded);
-      update_from_json(c, cj);
+      update_from_json(c, cj, RecordedKeys::Ignore);
     } catch (const Error& e) {
       fail_file(cfg_path, "{}", e.what());
     }

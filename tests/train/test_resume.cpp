@@ -179,7 +179,7 @@ TEST(Resume, FromTheRunsOwnConfigJson) {
                                                "--quiet", fern(), run.string()));
   ASSERT_EQ(first.exit_code, 0) << first.output;
   const auto saved = nlohmann::json::parse(read_file(run / "config.json"));
-  ASSERT_EQ(fs::path(saved["dafe_prior_dir"].get<std::string>()), run / "init/depth");
+  ASSERT_EQ(fs::path(saved["dafe_prior"].get<std::string>()), run / "init/depth");
   ASSERT_EQ(saved["dafe_prior_kind"], "depth");
   const std::string model = read_file(run / "point_cloud/iteration_4/point_cloud.ply");
   const auto again = test::run_cli(fmt::format("-q train --config '{}' --resume '{}'", (run / "config.json").string(),

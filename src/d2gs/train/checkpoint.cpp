@@ -14,6 +14,7 @@
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/checksum.hpp"
 #include "d2gs/core/error.hpp"
+#include "d2gs/train/options.hpp"
 
 namespace d2gs {
 namespace fs = std::filesystem;
@@ -53,12 +54,6 @@ std::vector<T> integers(const json& j) {
 }
 
 // ---- the identity of a run ----
-
-// The keys of config.json that are not part of RunIdentity::options (see checkpoint.hpp).
-constexpr const char* kNotCompared[] = {"source",          "model_dir",       "resolution",
-                                        "n_views",         "train_views",     "test_views",
-                                        "iterations",      "save_iterations", "checkpoint_iterations",
-                                        "test_iterations", "log_every",       "quiet"};
 
 std::string absolute_path(const std::string& p) {
   std::error_code ec;
@@ -197,12 +192,15 @@ RunIdentity run_identity(const Scene& scene, const Split& split, const TrainConf
     r.train_images.push_back(c.image_name);
     r.train_sizes.push_back({c.width, c.height});
   }
-  to_json(r.options, config);
-  for (const char* key : kNotCompared) r.options.erase(key);
-  static const std::set<std::string> init_keywords = {"dense", "sparse", "random", "sfm-all-views"};
-  if (!init_keywords.count(config.init)) r.options["init"] = absolute_path(config.init);
-  if (!config.dafe.prior.empty() && config.dafe.prior != "stereo")
-    r.options["dafe_prior_dir"] = absolute_path(config.dafe.prior);
+  // The options that change the training (options.hpp, OptionRole::Training), paths made absolute.
+  for (const TrainOption& o : train_options()) {
+    if (o.role != OptionRole::Training) continue;
+    nlohmann::json value = o.get(config);
+    if (o.kind == OptionKind::Path && value.is_string() &&
+        std::find(o.keywords.begin(), o.keywords.end(), value.get<std::string>()) == o.keywords.end())
+      value = absolute_path(value.get<std::string>());
+    r.options[o.name] = std::move(value);
+  }
   return r;
 }
 
@@ -439,19 +437,21 @@ std::string check_resume(const fs::path& source, const Checkpoint& checkpoint, c
   }
   if (was.test_views != run.test_views)
     refuse("its test views were {}, this run's are {}", join(was.test_views), join(run.test_views));
-  // The options: the method, seed and SH degree first, then the others by name.
+  // The options under their current names (a checkpoint may use former ones): the method, seed and SH
+  // degree first, then the others by name.
+  const json was_options = with_current_names(was.options), run_options = with_current_names(run.options);
   std::vector<std::string> keys = {"method", "seed", "sh_degree"};
   std::set<std::string> rest;
-  for (const auto& [key, value] : was.options.items()) rest.insert(key);
-  for (const auto& [key, value] : run.options.items()) rest.insert(key);
+  for (const auto& [key, value] : was_options.items()) rest.insert(key);
+  for (const auto& [key, value] : run_options.items()) rest.insert(key);
   for (const auto& k : keys) rest.erase(k);
   keys.insert(keys.end(), rest.begin(), rest.end());
   for (const auto& key : keys) {
-    const bool in_was = was.options.contains(key), in_run = run.options.contains(key);
-    if (in_was && in_run && was.options.at(key) == run.options.at(key)) continue;
+    const bool in_was = was_options.contains(key), in_run = run_options.contains(key);
+    if (in_was && in_run && was_options.at(key) == run_options.at(key)) continue;
     if (!in_was && !in_run) continue;
-    refuse("it was trained with {} = {}, this run has {}", key, in_was ? was.options.at(key).dump() : "(no such option)",
-           in_run ? run.options.at(key).dump() : "(no such option)");
+    refuse("it was trained with {} = {}, this run has {}", key, in_was ? was_options.at(key).dump() : "(no such option)",
+           in_run ? run_options.at(key).dump() : "(no such option)");
   }
   // How far to train.
   if (iterations < s.iteration)

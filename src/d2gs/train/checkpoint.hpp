@@ -37,9 +37,10 @@ struct RunIdentity {
   std::vector<int> train_views, test_views;   // the split (global indices)
   std::vector<std::string> train_images;      // image names of the training views, in split order
   std::vector<std::array<int, 2>> train_sizes;  // width, height of each training view at -r
-  // Every option that changes the training (config.json keys), paths made absolute. Left out: those
-  // resolved above (source, resolution, n_views, train_views, test_views), --iterations (checked on its
-  // own) and the output-only ones (model_dir, save/checkpoint/test iterations, log_every, quiet).
+  // Every option that changes the training (config.json keys; OptionRole::Training in options.hpp), paths
+  // made absolute. Left out: those resolved above (source, resolution, n_views, train_views, test_views),
+  // --iterations (checked on its own) and the output-only ones (model_path, save/checkpoint/test
+  // iterations, log_every, quiet). check_resume compares them under their current names.
   nlohmann::json options = nlohmann::json::object();
 };
 

@@ -1,5 +1,7 @@
 #include "d2gs/train/presets.hpp"
 
+#include <nlohmann/json.hpp>
+
 #include "d2gs/core/error.hpp"
 
 namespace d2gs {
@@ -70,6 +72,17 @@ void apply_scene_preset(TrainConfig& c, const std::string& name) {
   c.dafe.mask_rule = DafeMaskRule::Percentile;
   c.dafe.tau = found->mask_percent;
   c.dafe.lambda = static_cast<float>(found->dafe_lambda);
+}
+
+void apply_given_options(TrainConfig& c, const nlohmann::json& given) {
+  TrainConfig out = c;
+  const auto named = [&given](const char* key) {
+    return given.contains(key) && given[key].is_string() ? given[key].get<std::string>() : std::string();
+  };
+  if (const std::string preset = named("preset"); !preset.empty()) apply_d2gs_preset(out, preset);
+  if (const std::string scene = named("scene_preset"); !scene.empty()) apply_scene_preset(out, scene);
+  update_from_json(out, given);
+  c = std::move(out);
 }
 
 }  // namespace d2gs
