@@ -22,6 +22,7 @@ if [ ${#targets[@]} -eq 0 ]; then
 fi
 for t in "${targets[@]}"; do
   [ -f "fuzz/$t.cpp" ] || { echo "fuzz.sh: no target '$t' (fuzz/$t.cpp)" >&2; exit 2; }
+  [ -d "fuzz/corpus/$t" ] || { echo "fuzz.sh: target '$t' has no seed corpus (fuzz/corpus/$t/)" >&2; exit 2; }
 done
 command -v clang++ >/dev/null || { echo "fuzz.sh: clang++ not found (run scripts/setup.sh)" >&2; exit 2; }
 
@@ -53,9 +54,10 @@ for t in "${targets[@]}"; do
   rc=$?
   set -e
   elapsed=$((SECONDS - started))
-  runs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1)
-  cov=$(grep -o 'cov: [0-9]*' "$log" | tail -1 | cut -d' ' -f2)
-  ft=$(grep -o 'ft: [0-9]*' "$log" | tail -1 | cut -d' ' -f2)
+  # (a log without these lines, from a target that stopped at once, must not end the script: || true)
+  runs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1 || true)
+  cov=$(grep -o 'cov: [0-9]*' "$log" | tail -1 | cut -d' ' -f2 || true)
+  ft=$(grep -o 'ft: [0-9]*' "$log" | tail -1 | cut -d' ' -f2 || true)
   found=$(find "$findings" -type f | wc -l)
   line="$t: ${runs:-?} executions in ${elapsed} s, cov ${cov:-?}, ft ${ft:-?}, corpus $(find "$corpus" -type f | wc -l) files, findings $found"
   if [ "$rc" -ne 0 ]; then

@@ -38,6 +38,7 @@ struct DemoOptions {
   int resolution = 2;
   int train_views = 3;
   std::string init = "dense";
+  std::string dense_method = "sgbm";
 };
 
 // Initial points from the training views only: every `stride`-th pixel of each training view's true
@@ -148,6 +149,7 @@ int run_demo(const DemoOptions& opt) {
     // dense / sparse: the trainer runs d2gs init on the training images (cached in RUN/init); random.
     c.init = opt.init == "points" ? (dir / "points3D.ply").string() : opt.init;
   }
+  c.init_dense_method = opt.dense_method;
   c.densify_from = std::min(100, opt.iterations);
   c.densify_until = opt.iterations;
   for (int k = 1; k <= 6; ++k) c.test_iterations.push_back(std::max(1, opt.iterations * k / 6));
@@ -203,6 +205,10 @@ Run add_demo_command(CLI::App& app) {
                   "'random', or 'points' (the scene's points3D.ply, sampled from every view: an oracle)")
       ->capture_default_str()
       ->check(CLI::IsMember({"dense", "sparse", "training-depth", "random", "points"}));
+  sub->add_option("--dense-method", opt->dense_method,
+                  "Stereo of --init dense: 'sgbm' or 'patchmatch' (as d2gs train --init-dense-method)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"sgbm", "patchmatch"}));
   return [opt]() -> int { return run_demo(*opt); };
 }
 

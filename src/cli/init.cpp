@@ -14,6 +14,7 @@
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
 #include "d2gs/geometry/training_geometry.hpp"
+#include "d2gs/model/ply.hpp"
 #include "d2gs/scene/scene.hpp"
 #include "d2gs/scene/split.hpp"
 
@@ -28,6 +29,8 @@ struct InitOptions {
   bool white_background = false;
   bool no_dense = false;
   bool oracle_accuracy = false;
+  std::string dense_method = "sgbm", geometry_resolution = "auto", compare_cloud;
+  int dense_stride = 0;  // 0: each method's default
   TrainingGeometryOptions geometry;
 };
 
@@ -40,6 +43,9 @@ Run add_init_command(CLI::App& app) {
       "Writes DIR/sparse/points3D.ply, DIR/dense/fused.ply, DIR/depth/NAME.npy (float32 H×W camera-space depth,\n"
       "0 = invalid; usable as `d2gs train --dafe-prior DIR/depth --dafe-prior-kind depth`), DIR/depth/NAME_valid.png\n"
       "and DIR/init.json, with DIR = SCENE/{N}_views unless -o is given. Only the training views are read.\n"
+      "--dense-method patchmatch: PatchMatch multi-view stereo (COLMAP-like, on the CPU) and fusion of the depth\n"
+      "and normal maps, at the highest resolution of the scene folder (depth maps at that size; fused.ply with\n"
+      "normals); SGBM (default) runs at the training resolution.\n"
       "Example: d2gs init -s ../shared/data/nerf_llff_data/fern --n-views 3 -r 8 -o out/fern_init");
   auto o = std::make_shared<InitOptions>();
   cmd->add_option("-s,--source", o->source, "Scene folder (COLMAP, LLFF or Blender)")->required();
@@ -64,10 +70,45 @@ Run add_init_command(CLI::App& app) {
                   "Largest reprojection error of a triangulated point");
   cmd->add_option("--min-angle", o->geometry.triangulation.min_angle_deg, "Smallest triangulation angle (degrees)");
   cmd->add_flag("--no-dense", o->no_dense, "Sparse points only (no stereo, no depth maps)");
-  cmd->add_option("--stereo-neighbors", o->geometry.stereo_neighbors, "Stereo partners of each view (nearest centres)");
+  cmd->add_option("--dense-method", o->dense_method,
+                  "'sgbm' (default: rectified semi-global matching between neighbouring views) or 'patchmatch' "
+                  "(PatchMatch multi-view stereo with geometric consistency and COLMAP-like fusion)")
+      ->check(CLI::IsMember({"sgbm", "patchmatch"}));
+  cmd->add_option("--geometry-resolution", o->geometry_resolution,
+                  "Images the geometry is computed from: 'training' (-r), 'highest' (the largest image folder, "
+                  "capped by --max-image-size) or 'auto' (default: highest for patchmatch, training for sgbm)")
+      ->check(CLI::IsMember({"auto", "training", "highest"}));
+  cmd->add_option("--max-image-size", o->geometry.max_image_size,
+                  "Cap on the longest image side at the highest resolution: the folder is divided by 2, 4, 8 until it "
+                  "fits (≤ 0: no cap)")
+      ->capture_default_str();
+  cmd->add_option("--stereo-neighbors", o->geometry.stereo_neighbors,
+                  "SGBM: stereo partners of each view (nearest centres)");
   cmd->add_option("--fusion-tolerance", o->geometry.fusion.relative_tolerance,
-                  "Relative depth difference within which two views agree");
-  cmd->add_option("--dense-stride", o->geometry.fusion.pixel_stride, "Pixel stride of the fused cloud");
+                  "SGBM: relative depth difference within which two views agree");
+  cmd->add_option("--dense-stride", o->dense_stride,
+                  "Pixel stride of the fused cloud (default: 4 for sgbm; patchmatch: every point whose first pixel "
+                  "lies on this grid, default 3)");
+  auto& pm = o->geometry.patch_match;
+  cmd->add_option("--pm-levels", pm.levels, "PatchMatch: pyramid levels (1: full size only)")->capture_default_str();
+  cmd->add_option("--pm-iterations", pm.iterations, "PatchMatch: red-black iterations at the coarsest level")
+      ->capture_default_str();
+  cmd->add_option("--pm-fine-iterations", pm.fine_iterations, "PatchMatch: refining iterations at each finer level")
+      ->capture_default_str();
+  cmd->add_option("--pm-geometric-iterations", pm.geometric_iterations,
+                  "PatchMatch: iterations of the geometric-consistency stage (0: none)")
+      ->capture_default_str();
+  cmd->add_option("--pm-window-radius", pm.window_radius, "PatchMatch: NCC window radius")->capture_default_str();
+  cmd->add_option("--pm-window-step", pm.window_step, "PatchMatch: NCC window sampling step")->capture_default_str();
+  cmd->add_option("--pm-min-consistent", pm.filter_min_consistent,
+                  "PatchMatch: source views that must agree for a depth to be kept (0: no filter)")
+      ->capture_default_str();
+  cmd->add_option("--fusion-min-pixels", o->geometry.patch_match_fusion.min_pixels,
+                  "PatchMatch fusion: pixels (across views) a fused point needs")
+      ->capture_default_str();
+  cmd->add_option("--compare-cloud", o->compare_cloud,
+                  "Also measure the dense cloud against this PLY (e.g. another pipeline's fused cloud): accuracy "
+                  "(ours to theirs) and completeness (theirs to ours), written to DIR/compare_cloud.json");
   cmd->add_flag("--oracle-accuracy", o->oracle_accuracy,
                 "Also measure the clouds against the dataset's all-view SfM points (measurement only)");
   return [o]() -> int {
@@ -82,6 +123,17 @@ Run add_init_command(CLI::App& app) {
     const Split split = make_split(scene, so);
     TrainingGeometryOptions g = o->geometry;
     g.dense = !o->no_dense;
+    g.dense_method = parse_dense_method(o->dense_method);
+    g.resolution = parse_geometry_resolution(o->geometry_resolution);
+    if (o->dense_stride != 0) {
+      if (o->dense_stride < 1) fail("--dense-stride must be at least 1, got {}", o->dense_stride);
+      g.fusion.pixel_stride = o->dense_stride;
+      g.patch_match_fusion.pixel_stride = o->dense_stride;
+    }
+    validate(g.patch_match);
+    validate(g.patch_match_fusion);
+    PointCloud compare;
+    if (!o->compare_cloud.empty()) compare = read_point_cloud_ply(o->compare_cloud);  // before the work
     const std::filesystem::path dir =
         o->output.empty() ? training_geometry_dir(scene, split.train.size()) : std::filesystem::path(o->output);
     check_output_folder(dir);  // before the work: a path under a file fails now
@@ -91,6 +143,26 @@ Run add_init_command(CLI::App& app) {
                                    geo.mean_reprojection_px());
     if (g.dense) line += fmt::format(", {} dense points", geo.dense.size());
     spdlog::info("{} in {:.2f} s → {}", line, geo.total_seconds(), dir.string());
+    if (!o->compare_cloud.empty() && g.dense) {
+      // Both medians as fractions of the compared cloud's extent.
+      const CloudAccuracy acc = cloud_accuracy(geo.dense, compare), comp = cloud_accuracy(compare, geo.dense);
+      const double extent = acc.reference_extent;
+      spdlog::info("compare with {} ({} points): accuracy (ours to theirs) median {:.4g} = {:.4f} of its extent {:.4g}; "
+                   "completeness (theirs to ours) median {:.4g} = {:.4f}; {} dense points of ours",
+                   o->compare_cloud, compare.size(), acc.median, extent > 0 ? acc.median / extent : 0.0, extent,
+                   comp.median, extent > 0 ? comp.median / extent : 0.0, geo.dense.size());
+      const nlohmann::json j = {{"reference", o->compare_cloud},
+                                {"reference_points", compare.size()},
+                                {"points", geo.dense.size()},
+                                {"extent", extent},
+                                {"accuracy_median", acc.median},
+                                {"accuracy_mean", acc.mean},
+                                {"accuracy_fraction", extent > 0 ? acc.median / extent : 0.0},
+                                {"completeness_median", comp.median},
+                                {"completeness_mean", comp.mean},
+                                {"completeness_fraction", extent > 0 ? comp.median / extent : 0.0}};
+      write_file_atomic(dir / "compare_cloud.json", j.dump(2));
+    }
     if (o->oracle_accuracy) {
       if (scene.sfm_points.empty()) fail("{}: the scene has no SfM points to measure against", o->source);
       nlohmann::json acc;
@@ -105,6 +177,7 @@ Run add_init_command(CLI::App& app) {
                      {"points", cloud.size()}};
       };
       report("sparse", geo.sparse);
+      if (!compare.empty()) report("compared", compare);
       if (g.dense) {
         report("dense", geo.dense);
         // Depth maps: relative error of the stereo depth at the pixels where oracle points project.
@@ -116,7 +189,11 @@ Run add_init_command(CLI::App& app) {
             if (!(q.z > 0)) continue;
             const double u = c.fx * q.x / q.z + c.cx, v = c.fy * q.y / q.z + c.cy;
             if (!(u >= 0 && v >= 0 && u < c.width && v < c.height)) continue;
-            const float d = geo.depth[i].at(static_cast<int>(u), static_cast<int>(v));
+            // The depth maps may be at a higher resolution than the cameras (--geometry-resolution).
+            const DepthMap& dm = geo.depth[i];
+            const int du = std::min(dm.width - 1, static_cast<int>(u * dm.width / c.width));
+            const int dv = std::min(dm.height - 1, static_cast<int>(v * dm.height / c.height));
+            const float d = dm.at(du, dv);
             if (d > 0) rel.push_back(std::abs(d - q.z) / q.z), signed_rel.push_back((d - q.z) / q.z);
           }
         }

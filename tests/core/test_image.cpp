@@ -41,6 +41,23 @@ TEST(Image, RgbOrderAndAreaResize) {
   EXPECT_NEAR(half.at(5, 3, 0), expect, 1e-6f);
 }
 
+TEST(Image, AreaResizeOfADepthMapIgnoresItsZeros) {
+  // 4x2 → 2x1: block 0 holds depths 2, 4 and two zeros (half covered: mean of the valid ones, 3; a plain
+  // area resize would give 1.5); block 1 holds one depth of 8 (a quarter covered: no value).
+  Image depth(4, 2, 1);
+  depth.pixels = {2.0f, 0.0f, 8.0f, 0.0f,  //
+                  0.0f, 4.0f, 0.0f, 0.0f};
+  const Image out = resize_area_nonzero(depth, 2, 1);
+  EXPECT_FLOAT_EQ(out.pixels[0], 3.0f);
+  EXPECT_FLOAT_EQ(out.pixels[1], 0.0f);
+  EXPECT_FLOAT_EQ(resize_area(depth, 2, 1).pixels[0], 1.5f);
+  // Fully valid: the plain area resize.
+  Image full(4, 2, 1, 5.0f);
+  full.pixels[0] = 1.0f;
+  EXPECT_FLOAT_EQ(resize_area_nonzero(full, 2, 1).pixels[0], resize_area(full, 2, 1).pixels[0]);
+  EXPECT_THROW(resize_area_nonzero(Image(4, 2, 3), 2, 1), Error);
+}
+
 TEST(Image, CorruptAndMissingFilesAreErrors) {
   const auto dir = test::scratch_dir();
   write_file_atomic(dir / "bad.png", "\x89PNG\r\n\x1a\nthis is not a png");

@@ -48,6 +48,31 @@ TEST(ExperimentConfig, FernExampleIsThreeMethodsTimesThreeSeeds) {
   EXPECT_EQ(find(runs, "3dgs", 0).train_config["preset"], "");
 }
 
+// A relative initial cloud is found under data_root, as the scene sources are; keywords stay keywords.
+TEST(ExperimentConfig, RelativeInitCloudIsUnderTheDataRoot) {
+  const auto file = test::source_dir() / "configs/experiments/llff_fern_fidelity.json";
+  const ExperimentConfig c = load_experiment_config(file, test::shared_data().string());
+  const auto runs = expand_runs(c, "/tmp/fid");
+  ASSERT_EQ(runs.size(), 24u);
+  const auto cloud = (test::shared_data() / "published_init/fern/3_views_fused.ply").lexically_normal();
+  for (const auto& r : runs) EXPECT_EQ(r.train_config["init"], fs::absolute(cloud).string()) << r.id();
+  const auto mvs = expand_runs(
+      load_experiment_config(test::source_dir() / "configs/experiments/llff_fern_mvs.json", test::shared_data().string()),
+      "/tmp/mvs");
+  EXPECT_EQ(find(mvs, "dropgaussian-pm-init", 0).train_config["init"], "dense");
+  EXPECT_EQ(find(mvs, "dropgaussian-pm-init", 0).train_config["init_dense_method"], "patchmatch");
+  EXPECT_EQ(find(mvs, "d2gs-published-init", 2).train_config["init"], fs::absolute(cloud).string());
+  // Under another data root the same file names a cloud that is not there: one line naming the file.
+  try {
+    (void)expand_runs(load_experiment_config(file, "/nonexistent-root"), "/tmp/fid");
+    FAIL() << "expected an error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("llff_fern_fidelity.json"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("/nonexistent-root/published_init/fern/3_views_fused.ply"), std::string::npos)
+        << e.what();
+  }
+}
+
 TEST(ExperimentConfig, AblationExampleMirrorsThePaperTable) {
   const auto file = test::source_dir() / "configs/experiments/llff_fern_ablation.json";
   const ExperimentConfig c = load_experiment_config(file, test::shared_data().string());

@@ -4,7 +4,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <unistd.h>
 
 #include <fmt/format.h>
 
@@ -12,25 +11,14 @@
 #include "d2gs/geometry/stereo.hpp"
 #include "d2gs/geometry/training_geometry.hpp"
 #include "d2gs/scene/synthetic_scene.hpp"
+#include "synthetic_fixture.hpp"
 #include "test_paths.hpp"
 
 namespace d2gs {
 namespace {
 namespace fs = std::filesystem;
 
-SyntheticSceneOptions small_scene() {
-  SyntheticSceneOptions o;
-  o.width = 252;
-  o.height = 189;
-  o.supersample = 2;
-  o.seed = 3;
-  return o;
-}
-
-const SyntheticScene& scene() {
-  static const SyntheticScene s(small_scene());
-  return s;
-}
+const SyntheticScene& scene() { return test::small_synthetic_scene(); }
 
 // Depth errors measured as disparity errors in pixels, f·B·|1/z − 1/z_true| for a baseline B: the unit
 // in which stereo errs (a tenth of a pixel is 4 % of depth on the far backdrop, 0.2 % up close).
@@ -122,25 +110,8 @@ TEST(Fusion, BackProjectionLandsOnTheTracedSurface) {
   EXPECT_LT(glm::length(glm::dvec3(cloud.positions[3 * row_points + 2]) - hit.position), 1e-4 * hit.depth);
 }
 
-// The whole pipeline on the synthetic scene written as an LLFF folder (one per process).
-const fs::path& synthetic_dir() {
-  struct Shared {
-    fs::path dir = fs::temp_directory_path() / "d2gs-tests" / fmt::format("geometry-synthetic-{}", ::getpid());
-    Shared() {
-      fs::remove_all(dir);
-      write_synthetic_scene(dir, small_scene());
-    }
-    ~Shared() {
-      std::error_code ec;
-      fs::remove_all(dir, ec);
-    }
-  };
-  static const Shared shared;
-  return shared.dir;
-}
-
 TEST(TrainingGeometry, SyntheticSceneSparseAndDenseLieOnTheTrueSurfaces) {
-  const Scene s = load_scene(synthetic_dir());
+  const Scene s = load_scene(test::small_synthetic_dir());
   const std::vector<int> views = {1, 3, 12};
   TrainingGeometryOptions o;
   o.fusion.pixel_stride = 2;

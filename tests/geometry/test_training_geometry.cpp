@@ -14,6 +14,7 @@
 #include "d2gs/geometry/training_geometry.hpp"
 #include "d2gs/model/ply.hpp"
 #include "d2gs/scene/split.hpp"
+#include "synthetic_fixture.hpp"
 #include "test_paths.hpp"
 
 namespace d2gs {
@@ -37,14 +38,7 @@ Fern3 fern3() {
   return f;
 }
 
-// Records every decoded image file while alive.
-struct ImageReads {
-  std::vector<fs::path> paths;
-  ImageReads() {
-    set_image_read_observer([this](const fs::path& p) { paths.push_back(p); });
-  }
-  ~ImageReads() { set_image_read_observer(nullptr); }
-};
+using test::ImageReads;
 
 TEST(TrainingGeometry, Fern3ViewsPointsAccuracyAndOnlyTrainingImages) {
   const Fern3 f = fern3();

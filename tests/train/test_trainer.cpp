@@ -216,7 +216,7 @@ TEST(Trainer, SavesAndTestsBeforeTheIterationsOpacityReset) {
   std::ifstream log(dir / "run/train_log.jsonl");
   for (std::string line; std::getline(log, line);) {
     const auto j = nlohmann::json::parse(line);
-    if (j.value("event", "") == "test") psnr[j["iteration"].get<int>()] = j["mean"]["PSNR"].get<double>();
+    if (j.value("event", "") == "test") psnr[j["iteration"].get<int>()] = j["psnr"].get<double>();
   }
   ASSERT_EQ(psnr.size(), 3u);
   EXPECT_NEAR(psnr[3], psnr[2], 0.5);  // the reset has not happened yet when iteration 3 is scored

@@ -216,6 +216,21 @@ Image resize_area(const Image& image, int width, int height) {
   return out;
 }
 
+Image resize_area_nonzero(const Image& map, int width, int height) {
+  if (map.channels != 1) fail("resize_area_nonzero: expected one channel, got {}", map.channels);
+  Image weighted(map.width, map.height, 1), mask(map.width, map.height, 1);
+  for (std::size_t i = 0; i < map.pixels.size(); ++i) {
+    const bool valid = map.pixels[i] != 0.0f;
+    weighted.pixels[i] = valid ? map.pixels[i] : 0.0f;
+    mask.pixels[i] = valid ? 1.0f : 0.0f;
+  }
+  const Image sum = resize_area(weighted, width, height), coverage = resize_area(mask, width, height);
+  Image out(width, height, 1);
+  for (std::size_t i = 0; i < out.pixels.size(); ++i)
+    out.pixels[i] = coverage.pixels[i] >= 0.5f ? sum.pixels[i] / coverage.pixels[i] : 0.0f;
+  return out;
+}
+
 void write_image(const fs::path& path, const Image& image) {
   if (image.channels != 1 && image.channels != 3 && image.channels != 4)
     fail_file(path, "cannot write an image with {} channels", image.channels);

@@ -46,6 +46,9 @@ Image decode_image(std::string_view bytes, const std::filesystem::path& source);
 ImageSize read_image_size(const std::filesystem::path& path);
 // Area (box-average) resampling to the given size, as OpenCV's INTER_AREA.
 Image resize_area(const Image& image, int width, int height);
+// Area resampling of a one-channel map whose 0 means "no value" (depth maps): each output pixel is the
+// area-weighted mean of the non-zero values under it, or 0 when they cover less than half of its area.
+Image resize_area_nonzero(const Image& map, int width, int height);
 // Writes 8-bit PNG/JPEG (by extension) atomically; values are clamped to [0,1] and rounded.
 void write_image(const std::filesystem::path& path, const Image& image);
 // Writes a single-channel image as a 16-bit PNG atomically: value v is stored as round(v * scale).

@@ -221,6 +221,10 @@ std::vector<RunSpec> expand_runs(const ExperimentConfig& config, const fs::path&
               c.scene_preset = scene_preset;
             }
             update_from_json(c, m.options);
+            // An initial cloud named by a relative path is, as a scene's source, relative to data_root.
+            if (c.init != "dense" && c.init != "sparse" && c.init != "random" && c.init != "sfm-all-views" &&
+                !c.init.empty() && fs::path(c.init).is_relative() && !config.data_root.empty())
+              c.init = fs::absolute(fs::path(config.data_root) / c.init).lexically_normal().string();
             c.source = scene.source;
             c.model_dir = (root / r.dir).string();
             c.n_views = views;

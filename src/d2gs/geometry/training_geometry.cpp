@@ -55,8 +55,9 @@ glm::u8vec3 color_at(const Image& img, const glm::dvec2& px) {
   return c;
 }
 
-// Depth range of the sparse points in front of a camera: 2nd and 98th percentiles of camera z.
-std::optional<std::pair<double, double>> sparse_depth_range(const Camera& cam, const PointCloud& sparse) {
+// Depth range of the sparse points in front of a camera: the lo and hi quantiles of camera z.
+std::optional<std::pair<double, double>> sparse_depth_range(const Camera& cam, const PointCloud& sparse,
+                                                            double lo = 0.02, double hi = 0.98) {
   std::vector<double> z;
   for (const auto& p : sparse.positions) {
     const glm::dvec3 q = cam.R_world_to_cam * glm::dvec3(p) + cam.t_world_to_cam;
@@ -65,10 +66,12 @@ std::optional<std::pair<double, double>> sparse_depth_range(const Camera& cam, c
   if (z.size() < 10) return std::nullopt;
   std::sort(z.begin(), z.end());
   const auto at = [&](double q) { return z[static_cast<std::size_t>(q * static_cast<double>(z.size() - 1))]; };
-  return std::make_pair(at(0.02), at(0.98));
+  return std::make_pair(at(lo), at(hi));
 }
 
-std::string options_key(const TrainingGeometryOptions& o) {
+// What changes the result. Keys of PatchMatch and of a resolution other than the training one are added
+// only when they apply, so that SGBM geometries written before they existed are still found.
+std::string options_key(const TrainingGeometryOptions& o, int training_resolution, int geometry_res) {
   nlohmann::json j = {{"max_features", o.max_features},
                       {"sift_contrast_threshold", o.sift_contrast_threshold},
                       {"ratio", o.match.ratio},
@@ -85,10 +88,91 @@ std::string options_key(const TrainingGeometryOptions& o) {
                       {"pixel_stride", o.fusion.pixel_stride},
                       {"max_dense_points", o.max_dense_points},
                       {"seed", o.seed}};
+  if (geometry_res != training_resolution) j["geometry_resolution"] = geometry_res;
+  if (o.dense && o.dense_method == DenseMethod::PatchMatch) {
+    const PatchMatchOptions& p = o.patch_match;
+    const PatchMatchFusionOptions& f = o.patch_match_fusion;
+    j["dense_method"] = to_string(o.dense_method);
+    j["patch_match"] = {{"window_radius", p.window_radius},
+                        {"window_step", p.window_step},
+                        {"sigma_spatial", p.sigma_spatial},
+                        {"sigma_color", p.sigma_color},
+                        {"ncc_sigma", p.ncc_sigma},
+                        {"min_triangulation_angle_deg", p.min_triangulation_angle_deg},
+                        {"max_source_views", p.max_source_views},
+                        {"levels", p.levels},
+                        {"iterations", p.iterations},
+                        {"fine_iterations", p.fine_iterations},
+                        {"geometric_iterations", p.geometric_iterations},
+                        {"geom_weight", p.geom_weight},
+                        {"geom_max_px", p.geom_max_px},
+                        {"filter_min_ncc", p.filter_min_ncc},
+                        {"filter_min_triangulation_angle_deg", p.filter_min_triangulation_angle_deg},
+                        {"filter_geom_max_px", p.filter_geom_max_px},
+                        {"filter_min_consistent", p.filter_min_consistent}};
+    j["patch_match_fusion"] = {{"max_reprojection_px", f.max_reprojection_px},
+                               {"max_relative_depth", f.max_relative_depth},
+                               {"max_normal_deg", f.max_normal_deg},
+                               {"max_traversal_depth", f.max_traversal_depth},
+                               {"min_pixels", f.min_pixels},
+                               {"pixel_stride", f.pixel_stride}};
+  }
   return j.dump();
 }
 
+bool is_dir(const fs::path& p) {
+  std::error_code ec;
+  return fs::is_directory(p, ec);
+}
+
 }  // namespace
+
+const char* to_string(DenseMethod method) { return method == DenseMethod::PatchMatch ? "patchmatch" : "sgbm"; }
+
+DenseMethod parse_dense_method(const std::string& name) {
+  if (name == "sgbm") return DenseMethod::Sgbm;
+  if (name == "patchmatch") return DenseMethod::PatchMatch;
+  fail("dense method must be 'sgbm' or 'patchmatch', got '{}'", name);
+}
+
+const char* to_string(GeometryResolution r) {
+  switch (r) {
+    case GeometryResolution::Auto: return "auto";
+    case GeometryResolution::Training: return "training";
+    case GeometryResolution::Highest: return "highest";
+  }
+  return "auto";
+}
+
+GeometryResolution parse_geometry_resolution(const std::string& name) {
+  if (name == "auto") return GeometryResolution::Auto;
+  if (name == "training") return GeometryResolution::Training;
+  if (name == "highest") return GeometryResolution::Highest;
+  fail("geometry resolution must be 'auto', 'training' or 'highest', got '{}'", name);
+}
+
+int geometry_resolution(const Scene& scene, const TrainingGeometryOptions& o) {
+  GeometryResolution r = o.resolution;
+  if (r == GeometryResolution::Auto)
+    r = o.dense && o.dense_method == DenseMethod::PatchMatch ? GeometryResolution::Highest : GeometryResolution::Training;
+  if (r == GeometryResolution::Training || scene.cameras.empty()) return scene.resolution;
+  int R = 1;
+  if (scene.format != SceneFormat::Blender) {
+    // The largest folder: images/ (R = 1), else images_2/, images_4/, images_8/.
+    R = 0;
+    for (int f : {1, 2, 4, 8})
+      if (is_dir(scene.root / (f == 1 ? std::string("images") : fmt::format("images_{}", f)))) {
+        R = f;
+        break;
+      }
+    if (R == 0) return scene.resolution;
+  }
+  // The cap: sizes scale with 1/R from the scene's own (read from the image headers when it was loaded).
+  const Camera& c = scene.cameras.front();
+  const double longest = static_cast<double>(std::max(c.width, c.height)) * scene.resolution;  // at R = 1
+  while (o.max_image_size > 0 && R < 8 && longest / R > o.max_image_size) R *= 2;
+  return R;
+}
 
 double TrainingGeometry::mean_reprojection_px() const {
   if (sparse_errors_px.empty()) return 0.0;
@@ -102,6 +186,14 @@ double TrainingGeometry::total_seconds() const {
   return s;
 }
 
+namespace {
+void dense_patch_match(TrainingGeometry& g, const std::vector<const Camera*>& cams,
+                       const std::vector<const Image*>& images, const TrainingGeometryOptions& options,
+                       StepTimer& timer);
+void dense_sgbm(TrainingGeometry& g, const std::vector<const Camera*>& cams, const std::vector<Image>& images,
+                const TrainingGeometryOptions& options, StepTimer& timer);
+}  // namespace
+
 TrainingGeometry build_training_geometry(const Scene& scene, const std::vector<int>& views,
                                          const TrainingGeometryOptions& options) {
   TrainingGeometry g;
@@ -112,14 +204,39 @@ TrainingGeometry build_training_geometry(const Scene& scene, const std::vector<i
     if (v < 0 || static_cast<std::size_t>(v) >= scene.cameras.size())
       fail_file(scene.root, "training view {} is out of range", v);
   const std::size_t n = views.size();
-  std::vector<const Camera*> cams;
-  for (int v : views) cams.push_back(&scene.cameras[static_cast<std::size_t>(v)]);
   StepTimer timer(g.timings);
+  // The images at the geometry's resolution: the same scene read at another -r, with the given poses.
+  g.geometry_resolution = geometry_resolution(scene, options);
+  Scene rescaled;
+  const Scene* gs = &scene;
+  if (g.geometry_resolution != scene.resolution) {
+    SceneLoadOptions lo;
+    lo.resolution = g.geometry_resolution;
+    lo.background = scene.background;
+    lo.image_source = scene.image_source;
+    rescaled = load_scene(scene.root, lo);
+    if (rescaled.cameras.size() != scene.cameras.size())
+      fail_file(scene.root, "has {} images at 1/{} resolution but {} at 1/{}", rescaled.cameras.size(),
+                g.geometry_resolution, scene.cameras.size(), scene.resolution);
+    for (int v : views) {
+      Camera& c = rescaled.cameras[static_cast<std::size_t>(v)];
+      c.R_world_to_cam = scene.cameras[static_cast<std::size_t>(v)].R_world_to_cam;
+      c.t_world_to_cam = scene.cameras[static_cast<std::size_t>(v)].t_world_to_cam;
+    }
+    gs = &rescaled;
+  }
+  std::vector<const Camera*> cams;
+  for (int v : views) cams.push_back(&gs->cameras[static_cast<std::size_t>(v)]);
+  g.width = cams[0]->width;
+  g.height = cams[0]->height;
 
   // Images (training views only) and SIFT.
   std::vector<Image> images(n);
-  for (std::size_t i = 0; i < n; ++i) images[i] = load_image(scene, views[i]);
-  spdlog::info("init: read {} training views ({}) in {:.2f} s", n, view_list(scene, views), timer.done("read images"));
+  for (std::size_t i = 0; i < n; ++i) images[i] = load_image(*gs, views[i]);
+  std::vector<const Image*> image_ptrs;
+  for (const auto& im : images) image_ptrs.push_back(&im);
+  spdlog::info("init: read {} training views ({}) at {}x{} (1/{} resolution) in {:.2f} s", n, view_list(scene, views),
+               g.width, g.height, g.geometry_resolution, timer.done("read images"));
   std::vector<ViewFeatures> features(n);
 #pragma omp parallel for schedule(dynamic)
   for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(n); ++i)
@@ -198,8 +315,64 @@ TrainingGeometry build_training_geometry(const Scene& scene, const std::vector<i
               "overlap enough for a geometry of their own (use --init random or --init PLY)",
               g.sparse.size(), view_list(scene, views), g.matches);
   if (!options.dense) return g;
+  if (options.dense_method == DenseMethod::PatchMatch) {
+    dense_patch_match(g, cams, image_ptrs, options, timer);
+  } else {
+    dense_sgbm(g, cams, images, options, timer);
+  }
+  if (options.max_dense_points > 0 && g.dense.size() > options.max_dense_points) {
+    // Seeded subsample, kept in the original order.
+    Rng rng = Rng::stream(options.seed, "dense-subsample");
+    std::vector<std::size_t> idx(g.dense.size());
+    std::iota(idx.begin(), idx.end(), std::size_t{0});
+    for (std::size_t i = 0; i < options.max_dense_points; ++i)
+      std::swap(idx[i], idx[i + rng.below(idx.size() - i)]);
+    idx.resize(options.max_dense_points);
+    std::sort(idx.begin(), idx.end());
+    PointCloud sub;
+    for (std::size_t i : idx) {
+      sub.positions.push_back(g.dense.positions[i]);
+      sub.colors.push_back(g.dense.colors[i]);
+      if (!g.dense.normals.empty()) sub.normals.push_back(g.dense.normals[i]);
+    }
+    g.dense = std::move(sub);
+  }
+  std::size_t valid = 0, total = 0;
+  for (const auto& d : g.depth) valid += d.valid_count(), total += d.depth.size();
+  spdlog::info("init: fusion: {:.1f} % of the pixels have a consistent depth → {} dense points ({:.2f} s)",
+               total ? 100.0 * static_cast<double>(valid) / static_cast<double>(total) : 0.0, g.dense.size(),
+               timer.done("fusion"));
+  return g;
+}
 
-  // Dense: rectified SGBM between each view and its nearest views.
+namespace {
+
+void dense_patch_match(TrainingGeometry& g, const std::vector<const Camera*>& cams,
+                       const std::vector<const Image*>& images, const TrainingGeometryOptions& options,
+                       StepTimer& timer) {
+  // Depth ranges as COLMAP's: 1st and 99th percentiles of the sparse points' depths, stretched by 25 %.
+  std::vector<std::pair<double, double>> ranges;
+  for (const Camera* c : cams) {
+    const auto r = sparse_depth_range(*c, g.sparse, 0.01, 0.99);
+    if (!r) fail("init: fewer than 10 sparse points lie in front of {}: no depth range for its stereo", c->image_name);
+    ranges.emplace_back(r->first * 0.75, r->second * 1.25);
+  }
+  PatchMatchOptions pm = options.patch_match;
+  pm.seed = options.seed;
+  const auto maps = patch_match_stereo(cams, images, ranges, pm);
+  std::size_t valid = 0;
+  for (const auto& m : maps) valid += m.depth.valid_count();
+  spdlog::info("init: PatchMatch stereo on {} views at {}x{}: {} filtered depths ({:.2f} s)", cams.size(),
+               cams[0]->width, cams[0]->height, valid, timer.done("stereo"));
+  g.dense = fuse_patch_match(cams, images, maps, options.patch_match_fusion);
+  g.depth.clear();
+  for (const auto& m : maps) g.depth.push_back(m.depth);
+}
+
+void dense_sgbm(TrainingGeometry& g, const std::vector<const Camera*>& cams, const std::vector<Image>& images,
+                const TrainingGeometryOptions& options, StepTimer& timer) {
+  const std::size_t n = cams.size();
+  // Rectified SGBM between each view and its nearest views.
   std::vector<std::pair<std::size_t, std::size_t>> stereo_pairs;
   for (std::size_t a = 0; a < n; ++a) {
     std::vector<std::size_t> order;
@@ -259,26 +432,9 @@ TrainingGeometry build_training_geometry(const Scene& scene, const std::vector<i
   std::vector<const Image*> image_ptrs;
   for (const auto& im : images) image_ptrs.push_back(&im);
   g.dense = fuse_depth_maps(cams, image_ptrs, g.depth, options.fusion.pixel_stride);
-  if (options.max_dense_points > 0 && g.dense.size() > options.max_dense_points) {
-    // Seeded subsample, kept in the original order.
-    Rng rng = Rng::stream(options.seed, "dense-subsample");
-    std::vector<std::size_t> idx(g.dense.size());
-    std::iota(idx.begin(), idx.end(), std::size_t{0});
-    for (std::size_t i = 0; i < options.max_dense_points; ++i)
-      std::swap(idx[i], idx[i + rng.below(idx.size() - i)]);
-    idx.resize(options.max_dense_points);
-    std::sort(idx.begin(), idx.end());
-    PointCloud sub;
-    for (std::size_t i : idx) sub.positions.push_back(g.dense.positions[i]), sub.colors.push_back(g.dense.colors[i]);
-    g.dense = std::move(sub);
-  }
-  std::size_t valid = 0, total = 0;
-  for (const auto& d : g.depth) valid += d.valid_count(), total += d.depth.size();
-  spdlog::info("init: fusion: {:.1f} % of the pixels have a consistent depth → {} dense points ({:.2f} s)",
-               total ? 100.0 * static_cast<double>(valid) / static_cast<double>(total) : 0.0, g.dense.size(),
-               timer.done("fusion"));
-  return g;
 }
+
+}  // namespace
 
 fs::path training_geometry_dir(const Scene& scene, std::size_t n_views) {
   return scene.root / fmt::format("{}_views", n_views);
@@ -313,9 +469,14 @@ void write_training_geometry(const fs::path& dir, const Scene& scene, const Trai
       {"views", g.views},
       {"image_names", names},
       {"resolution", scene.resolution},
+      {"image_source", to_string(scene.image_source)},
       {"width", scene.cameras[static_cast<std::size_t>(g.views[0])].width},
       {"height", scene.cameras[static_cast<std::size_t>(g.views[0])].height},
-      {"options", options_key(options)},
+      {"geometry_resolution", g.geometry_resolution},
+      {"geometry_width", g.width},
+      {"geometry_height", g.height},
+      {"dense_method", options.dense ? to_string(options.dense_method) : ""},
+      {"options", options_key(options, scene.resolution, g.geometry_resolution)},
       {"sparse", "sparse/points3D.ply"},
       {"sparse_points", g.sparse.size()},
       {"mean_reprojection_px", g.mean_reprojection_px()},
@@ -344,7 +505,8 @@ std::optional<CachedTrainingGeometry> find_training_geometry(const fs::path& dir
     if (m.value("format", "") != "d2gs-training-geometry-1" || m.value("views", nlohmann::json()) != nlohmann::json(views) ||
         m.value("image_names", nlohmann::json()) != names ||
         m.value("resolution", nlohmann::json()) != nlohmann::json(scene.resolution) ||
-        m.value("options", "") != options_key(options))
+        m.value("image_source", "folder") != std::string(to_string(scene.image_source)) ||
+        m.value("options", "") != options_key(options, scene.resolution, geometry_resolution(scene, options)))
       return std::nullopt;
     CachedTrainingGeometry c;
     c.dir = dir;

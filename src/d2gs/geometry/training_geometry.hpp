@@ -4,9 +4,14 @@
 //   sparse: SIFT in every training view, matching between every pair (ratio test, mutual check,
 //           epipolar filter from the known poses), tracks (union-find), triangulation (DLT + refinement,
 //           cheirality / reprojection / angle filters), colours from the images;
-//   dense:  rectified SGBM stereo between neighbouring views (disparity range from the sparse points),
-//           per-view depth maps filtered by cross-view consistency (also the DAFE depth priors), fused
-//           into one coloured cloud.
+//   dense:  either PatchMatch multi-view stereo (patch_match.hpp: depth + normal per pixel against all
+//           other views, geometric consistency, filter) fused across views (patch_match_fusion.hpp), or
+//           rectified SGBM stereo between neighbouring views (disparity range from the sparse points),
+//           per-view depth maps filtered by cross-view consistency, fused into one coloured cloud; the
+//           depth maps are also the DAFE depth priors.
+// Resolution: the training resolution (-r), or the highest the scene folder offers (images/ when present,
+// else the largest images_N/), capped on its longest side; PatchMatch uses the highest by default, as the
+// published pipeline does (COLMAP on the full-resolution images), SGBM the training resolution.
 // Only the given views' images are decoded. The files (write_training_geometry) are
 //   DIR/init.json, DIR/sparse/points3D.ply, DIR/dense/fused.ply, DIR/depth/NAME.npy (float32 H×W,
 //   camera-space z, 0 = invalid) and DIR/depth/NAME_valid.png (255 = valid),
@@ -19,12 +24,27 @@
 
 #include "d2gs/geometry/fusion.hpp"
 #include "d2gs/geometry/matching.hpp"
+#include "d2gs/geometry/patch_match.hpp"
+#include "d2gs/geometry/patch_match_fusion.hpp"
 #include "d2gs/geometry/stereo.hpp"
 #include "d2gs/geometry/triangulation.hpp"
 #include "d2gs/scene/point_cloud.hpp"
 #include "d2gs/scene/scene.hpp"
 
 namespace d2gs {
+
+enum class DenseMethod { Sgbm, PatchMatch };
+const char* to_string(DenseMethod method);
+DenseMethod parse_dense_method(const std::string& name);  // "sgbm" | "patchmatch"; throws otherwise
+
+// Resolution of the images the geometry is computed from.
+enum class GeometryResolution {
+  Auto,      // Highest for PatchMatch, Training for SGBM
+  Training,  // the scene's -r
+  Highest,   // the largest image folder, capped by max_image_size
+};
+const char* to_string(GeometryResolution resolution);
+GeometryResolution parse_geometry_resolution(const std::string& name);  // "auto" | "training" | "highest"
 
 struct TrainingGeometryOptions {
   int max_features = 8000;
@@ -33,9 +53,16 @@ struct TrainingGeometryOptions {
   TriangulationOptions triangulation;
   int min_sparse_points = 20;            // fewer: the views do not overlap enough (error)
   bool dense = true;
-  int stereo_neighbors = 2;              // each view is paired with its nearest views (camera centres)
+  DenseMethod dense_method = DenseMethod::Sgbm;
+  GeometryResolution resolution = GeometryResolution::Auto;
+  // Highest: the image folder is divided by 2, 4, ... (up to 1/8 of full resolution) until its longest
+  // side is at most this (4032-px phone originals → 1008 px); ≤ 0: no cap.
+  int max_image_size = 1600;
+  int stereo_neighbors = 2;              // SGBM: each view is paired with its nearest views (camera centres)
   StereoOptions stereo;
-  FusionOptions fusion;
+  FusionOptions fusion;                  // SGBM's fusion
+  PatchMatchOptions patch_match;         // patch_match.seed is replaced by `seed`
+  PatchMatchFusionOptions patch_match_fusion;
   std::size_t max_dense_points = 300000; // larger fused clouds are subsampled (seeded)
   std::uint64_t seed = 0;
 };
@@ -47,6 +74,8 @@ struct StepTiming {
 
 struct TrainingGeometry {
   std::vector<int> views;                 // global indices of the training views
+  int geometry_resolution = 1;            // 1/R of full resolution the images were used at
+  int width = 0, height = 0;              // their size (of the first view)
   PointCloud sparse;
   std::vector<double> sparse_errors_px;   // mean reprojection error per sparse point
   std::vector<int> sparse_track_lengths;
@@ -62,6 +91,10 @@ struct TrainingGeometry {
 
 TrainingGeometry build_training_geometry(const Scene& scene, const std::vector<int>& views,
                                          const TrainingGeometryOptions& options);
+
+// The -r at which the geometry reads the images for these options: the scene's own, or the highest its
+// folder offers (capped). Reads image headers only.
+int geometry_resolution(const Scene& scene, const TrainingGeometryOptions& options);
 
 // SCENE/{N}_views (N = number of training views).
 std::filesystem::path training_geometry_dir(const Scene& scene, std::size_t n_views);

@@ -618,6 +618,8 @@ Gaussians parse_gaussians_ply(std::string_view bytes, const fs::path& src) {
 void write_point_cloud_ply(const fs::path& path, const PointCloud& cloud) {
   if (cloud.colors.size() != cloud.positions.size())
     fail_file(path, "point cloud has {} positions but {} colours", cloud.positions.size(), cloud.colors.size());
+  if (!cloud.normals.empty() && cloud.normals.size() != cloud.positions.size())
+    fail_file(path, "point cloud has {} positions but {} normals", cloud.positions.size(), cloud.normals.size());
   const std::size_t n = cloud.size();
   std::string bytes = "ply\nformat binary_little_endian 1.0\nelement vertex " + std::to_string(n) +
                       "\nproperty float x\nproperty float y\nproperty float z\n"
@@ -630,7 +632,7 @@ void write_point_cloud_ply(const fs::path& path, const PointCloud& cloud) {
       if (!std::isfinite(v)) fail_file(path, "cannot write point {}: coordinate {} is {}", i, "xyz"[j], std::isnan(v) ? "NaN" : "infinite");
       append_f32(bytes, v);
     }
-    for (int j = 0; j < 3; ++j) append_f32(bytes, 0.0f);
+    for (int j = 0; j < 3; ++j) append_f32(bytes, cloud.normals.empty() ? 0.0f : cloud.normals[i][j]);
     for (int j = 0; j < 3; ++j) bytes.push_back(static_cast<char>(cloud.colors[i][j]));
   }
   write_file_atomic(path, bytes);

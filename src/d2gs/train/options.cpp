@@ -220,7 +220,16 @@ TrainOption choice(const Spec& s, Field field, std::vector<std::pair<std::string
       }
     fail("key '{}': '{}' is not one of {}", name, v.get<std::string>(), list);
   };
-  o.check = [](const TrainConfig&) {};
+  // A value set in code (not read through set()) must be one of the names too.
+  o.check = [field, names, list, flag_name = o.flag()](const TrainConfig& c) {
+    const auto& v = field(c);
+    for (const auto& n : names)
+      if (n.second == v) return;
+    if constexpr (std::is_same_v<FieldType<Field>, std::string>)
+      fail("option {} must be one of {} (got '{}')", flag_name, list, v);
+    else
+      fail("option {} must be one of {}", flag_name, list);
+  };
   o.parse = [flag_name = o.flag(), names, list](const std::vector<std::string>& words_given) {
     const std::string& w = one_word(words_given, flag_name);
     for (const auto& n : names)
@@ -291,6 +300,12 @@ std::vector<TrainOption> declare() {
                     "SCENE/{N}_views or MODEL/init), 'sparse' (SIFT points triangulated from the training views), a "
                     "PLY file, 'random', or 'sfm-all-views' (the dataset's points3D: an ORACLE, it saw the test views)"},
                    [](auto& c) -> auto& { return c.init; }, Path, {"dense", "sparse", "random", "sfm-all-views"}));
+  t.push_back(choice({"init_dense_method", init,
+                      "Stereo of --init dense (and of --dafe-prior stereo): 'sgbm' (rectified SGBM at the training "
+                      "resolution) or 'patchmatch' (PatchMatch multi-view stereo at the highest resolution of the "
+                      "scene folder, as `d2gs init --dense-method patchmatch`)"},
+                     [](auto& c) -> auto& { return c.init_dense_method; },
+                     {{"sgbm", "sgbm"}, {"patchmatch", "patchmatch"}}));
   t.push_back(number({"random_points", init,
                       "Point count of --init random (random pixel rays of the training views, uniform inverse depth "
                       "within the scene's depth bounds: docs/training.md)"},

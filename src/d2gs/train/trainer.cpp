@@ -248,6 +248,7 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
   const std::function<CachedTrainingGeometry()> training_geometry = [&s, &geometry_dirs]() {
     TrainingGeometryOptions go;
     go.seed = s.cfg.seed;
+    go.dense_method = parse_dense_method(s.cfg.init_dense_method);
     return obtain_training_geometry(s.scene, s.split.train, go, geometry_dirs, s.out() / "init");
   };
   if (s.cfg.init == "dense" || s.cfg.init == "sparse") {

@@ -134,10 +134,14 @@ private:
       const int h = static_cast<int>(a.shape[0]), w = static_cast<int>(a.shape[1]);
       Image prior(w, h, 1);
       for (std::size_t i = 0; i < a.values.size(); ++i) prior.pixels[i] = static_cast<float>(a.values[i]);
-      if (w != cam.width || h != cam.height) prior = resize_area(prior, cam.width, cam.height);
-      // Depth priors mark pixels without a depth by 0 (d2gs init's stereo depth maps): never far.
+      // Depth priors mark pixels without a depth by 0 (d2gs init's stereo depth maps): never far, and
+      // never averaged into the valid depths when the map is resized (PatchMatch's maps are at the scene
+      // folder's highest resolution).
+      const bool depth = dafe_.prior_kind == PriorKind::Depth;
+      if (w != cam.width || h != cam.height) prior = depth ? resize_area_nonzero(prior, cam.width, cam.height)
+                                                           : resize_area(prior, cam.width, cam.height);
       std::vector<std::uint8_t> valid(prior.pixels.size(), 1);
-      if (dafe_.prior_kind == PriorKind::Depth)
+      if (depth)
         for (std::size_t i = 0; i < valid.size(); ++i) valid[i] = prior.pixels[i] > 0.0f;
       masks_[k] = dafe_mask(prior.pixels, dafe_.prior_kind, dafe_.mask_rule, dafe_.tau, &valid);
     }

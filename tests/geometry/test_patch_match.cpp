@@ -1,0 +1,421 @@
+// PatchMatch multi-view stereo and its fusion: the plane / homography / NCC math against direct
+// computations, depth and fused points against the synthetic scene's exact geometry, determinism, the
+// no-test-image rule and the one-line errors of bad inputs.
+#include <gtest/gtest.h>
+
+#include <omp.h>
+
+#include <algorithm>
+#include <cmath>
+#include <set>
+
+#include <fmt/format.h>
+
+#include "d2gs/core/error.hpp"
+#include "d2gs/core/random.hpp"
+#include "d2gs/geometry/fusion.hpp"
+#include "d2gs/geometry/patch_match.hpp"
+#include "d2gs/geometry/patch_match_fusion.hpp"
+#include "d2gs/geometry/training_geometry.hpp"
+#include "d2gs/scene/split.hpp"
+#include "d2gs/scene/synthetic_scene.hpp"
+#include "synthetic_fixture.hpp"
+#include "test_paths.hpp"
+
+namespace d2gs {
+namespace {
+namespace fs = std::filesystem;
+
+const SyntheticScene& scene() { return test::small_synthetic_scene(); }
+
+glm::dvec2 project(const Camera& c, const glm::dvec3& X) {
+  const glm::dvec3 q = c.R_world_to_cam * X + c.t_world_to_cam;
+  return {c.fx * q.x / q.z + c.cx, c.fy * q.y / q.z + c.cy};
+}
+
+TEST(PatchMatchMath, PlaneHomographyMapsPlanePointsToTheirProjections) {
+  const auto& cams = scene().cameras();
+  const Camera &ref = cams[1], &src = cams[12];
+  Rng rng(5);
+  for (int trial = 0; trial < 20; ++trial) {
+    const int x = 20 + static_cast<int>(rng.below(200)), y = 20 + static_cast<int>(rng.below(150));
+    const double z = 2.0 + 30.0 * rng.uniform();
+    glm::dvec3 n(rng.normal() * 0.4, rng.normal() * 0.4, -1.0);
+    n = glm::normalize(n);
+    const glm::dmat3 H = plane_homography(ref, src, x, y, z, n);
+    // Another pixel of the reference: its point on the plane, projected directly into the source.
+    const int x2 = x + static_cast<int>(rng.below(11)) - 5, y2 = y + static_cast<int>(rng.below(11)) - 5;
+    const double z2 = plane_depth_at(ref, x, y, z, n, x2, y2);
+    const glm::dvec3 X2 = backproject(ref, x2, y2, z2);
+    const glm::dvec2 direct = project(src, X2);
+    const glm::dvec3 h = H * glm::dvec3(x2 + 0.5, y2 + 0.5, 1.0);
+    EXPECT_NEAR(h.x / h.z, direct.x, 1e-6 * std::max(1.0, std::abs(direct.x)));
+    EXPECT_NEAR(h.y / h.z, direct.y, 1e-6 * std::max(1.0, std::abs(direct.y)));
+  }
+}
+
+TEST(PatchMatchMath, PlaneDepthTransferStaysOnThePlane) {
+  const Camera& c = scene().cameras()[4];
+  const glm::dvec3 n = glm::normalize(glm::dvec3(0.3, -0.2, -1.0));
+  const double z1 = 7.0;
+  const glm::dvec3 r1((10 + 0.5 - c.cx) / c.fx, (20 + 0.5 - c.cy) / c.fy, 1.0);
+  const double z2 = plane_depth_at(c, 10, 20, z1, n, 60, 90);
+  const glm::dvec3 r2((60 + 0.5 - c.cx) / c.fx, (90 + 0.5 - c.cy) / c.fy, 1.0);
+  EXPECT_NEAR(glm::dot(n, z2 * r2 - z1 * r1), 0.0, 1e-9);
+  EXPECT_NE(z2, z1);  // a slanted plane: the depth changes
+  // A fronto-parallel plane keeps its depth.
+  EXPECT_NEAR(plane_depth_at(c, 10, 20, z1, glm::dvec3(0, 0, -1), 60, 90), z1, 1e-12);
+}
+
+// The bilateral NCC written out in double precision, as the header states it.
+double direct_ncc_cost(const Image& ref, const Image& src, const glm::dmat3& H, int x, int y, int radius, int step,
+                       double ss, double sc) {
+  const double centre = ref.at(x, y, 0);
+  double sw = 0, sr = 0, sq = 0, srr = 0, sqq = 0, srq = 0;
+  for (int dy = -radius; dy <= radius; dy += step)
+    for (int dx = -radius; dx <= radius; dx += step) {
+      const double r = ref.at(x + dx, y + dy, 0);
+      const glm::dvec3 h = H * glm::dvec3(x + dx + 0.5, y + dy + 0.5, 1.0);
+      const double u = h.x / h.z - 0.5, v = h.y / h.z - 0.5;
+      const int iu = static_cast<int>(std::floor(u)), iv = static_cast<int>(std::floor(v));
+      const double fu = u - iu, fv = v - iv;
+      const double q = (1 - fv) * ((1 - fu) * src.at(iu, iv, 0) + fu * src.at(iu + 1, iv, 0)) +
+                       fv * ((1 - fu) * src.at(iu, iv + 1, 0) + fu * src.at(iu + 1, iv + 1, 0));
+      const double w = std::exp(-(dx * dx + dy * dy) / (2 * ss * ss) - (r - centre) * (r - centre) / (2 * sc * sc));
+      sw += w, sr += w * r, sq += w * q, srr += w * r * r, sqq += w * q * q, srq += w * r * q;
+    }
+  const double mr = sr / sw, mq = sq / sw;
+  const double vr = srr / sw - mr * mr, vq = sqq / sw - mq * mq, cov = srq / sw - mr * mq;
+  if (vr < 1e-5 || vq < 1e-5) return 2.0;  // a window without texture: the maximum (COLMAP's threshold)
+  return 1.0 - cov / std::sqrt(vr * vq);
+}
+
+TEST(PatchMatchMath, BilateralNccMatchesTheDirectFormula) {
+  const auto& cams = scene().cameras();
+  const Image ref = to_grey(scene().render(cams[1])), src = to_grey(scene().render(cams[12]));
+  Rng rng(9);
+  int textured = 0;
+  for (int trial = 0; trial < 20; ++trial) {
+    const int x = 30 + static_cast<int>(rng.below(190)), y = 30 + static_cast<int>(rng.below(130));
+    const glm::dvec3 n = glm::normalize(glm::dvec3(0.1 * rng.normal(), 0.1 * rng.normal(), -1.0));
+    const glm::dmat3 H = plane_homography(cams[1], cams[12], x, y, 3.0 + 10.0 * rng.uniform(), n);
+    const glm::dvec3 h = H * glm::dvec3(x + 0.5, y + 0.5, 1.0);
+    if (h.x / h.z < 10 || h.y / h.z < 10 || h.x / h.z > 240 || h.y / h.z > 178) continue;  // window inside
+    for (int step : {1, 2}) {
+      const double fast = bilateral_ncc_cost(ref, src, H, x, y, 5, step, 5.0, 0.2);
+      const double direct = direct_ncc_cost(ref, src, H, x, y, 5, step, 5.0, 0.2);
+      EXPECT_NEAR(fast, direct, 2e-3) << x << "," << y << " step " << step;
+      textured += direct < 2.0;
+    }
+  }
+  EXPECT_GT(textured, 5);  // the comparison was not only of textureless windows
+  // Invariances: an affine change of the intensities costs nothing; the negative image costs the maximum.
+  Image affine = ref, negative = ref;
+  for (auto& v : affine.pixels) v = 0.5f * v + 0.2f;
+  for (auto& v : negative.pixels) v = 1.0f - v;
+  const glm::dmat3 I(1.0);
+  EXPECT_NEAR(bilateral_ncc_cost(ref, affine, I, 100, 80, 5, 1, 5.0, 0.2), 0.0, 1e-3);
+  EXPECT_NEAR(bilateral_ncc_cost(ref, negative, I, 100, 80, 5, 1, 5.0, 0.2), 2.0, 1e-3);
+  // No texture in the source window: the maximum cost.
+  EXPECT_EQ(bilateral_ncc_cost(ref, Image(ref.width, ref.height, 1, 0.5f), I, 100, 80, 5, 1, 5.0, 0.2), 2.0);
+}
+
+// Three views of the synthetic scene (a wide triangle of the camera grid) with their exact depth maps.
+struct ThreeViews {
+  std::vector<Camera> cams;
+  std::vector<Image> images;
+  std::vector<std::vector<float>> truth;
+  std::vector<std::pair<double, double>> ranges;
+  std::vector<const Camera*> cam_ptrs() const {
+    std::vector<const Camera*> p;
+    for (const auto& c : cams) p.push_back(&c);
+    return p;
+  }
+  std::vector<const Image*> image_ptrs() const {
+    std::vector<const Image*> p;
+    for (const auto& i : images) p.push_back(&i);
+    return p;
+  }
+};
+
+const ThreeViews& three_views() {
+  static const ThreeViews t = [] {
+    ThreeViews v;
+    for (int i : {1, 3, 12}) {
+      v.cams.push_back(scene().cameras()[static_cast<std::size_t>(i)]);
+      v.images.push_back(scene().render(v.cams.back()));
+      v.truth.push_back(scene().depth_map(v.cams.back()));
+      v.ranges.emplace_back(2.0, 45.0);  // the scene's near surfaces to beyond its backdrop
+    }
+    return v;
+  }();
+  return t;
+}
+
+PatchMatchOptions quick_options() {
+  PatchMatchOptions o;
+  o.seed = 1;
+  return o;
+}
+
+// Depth errors as disparity errors in pixels against the nearest other view, f·B·|1/z − 1/z_true|: the unit
+// in which stereo errs (a tenth of a pixel is 4 % of depth on the far backdrop, 0.2 % up close).
+struct DepthStats {
+  double valid = 0, median_px = 1e9, within_half_px = 0;
+};
+
+DepthStats depth_stats(const DepthMap& d, const std::vector<float>& truth, std::size_t view) {
+  const auto& cams = three_views().cams;
+  double baseline = 1e9;
+  for (std::size_t j = 0; j < cams.size(); ++j)
+    if (j != view) baseline = std::min(baseline, glm::length(cams[j].center_world() - cams[view].center_world()));
+  const double fB = cams[view].fx * baseline;
+  std::vector<double> err;
+  std::size_t close = 0;
+  for (std::size_t i = 0; i < truth.size(); ++i)
+    if (d.depth[i] > 0.0f) {
+      const double e = fB * std::abs(1.0 / d.depth[i] - 1.0 / truth[i]);
+      err.push_back(e);
+      close += e < 0.5;
+    }
+  DepthStats s;
+  if (err.empty()) return s;
+  std::sort(err.begin(), err.end());
+  s.valid = static_cast<double>(err.size()) / static_cast<double>(truth.size());
+  s.median_px = err[err.size() / 2];
+  s.within_half_px = static_cast<double>(close) / static_cast<double>(err.size());
+  return s;
+}
+
+const std::vector<PatchMatchMap>& synthetic_maps() {
+  static const auto maps = patch_match_stereo(three_views().cam_ptrs(), three_views().image_ptrs(),
+                                              three_views().ranges, quick_options());
+  return maps;
+}
+
+TEST(PatchMatch, SyntheticDepthMapsRecoverTheTrueDepth) {
+  const auto& maps = synthetic_maps();
+  ASSERT_EQ(maps.size(), 3u);
+  for (std::size_t i = 0; i < 3; ++i) {
+    const DepthStats s = depth_stats(maps[i].depth, three_views().truth[i], i);
+    std::printf("patch match, view %s: %.1f %% kept, median disparity error %.3f px, %.1f %% within 0.5 px\n",
+                three_views().cams[i].image_name.c_str(), 100 * s.valid, s.median_px, 100 * s.within_half_px);
+    EXPECT_GT(s.valid, 0.3);
+    EXPECT_LT(s.median_px, 0.25);
+    EXPECT_GT(s.within_half_px, 0.7);
+    // Kept pixels carry unit normals facing the camera.
+    const Camera& c = three_views().cams[i];
+    for (int y = 0; y < c.height; y += 7)
+      for (int x = 0; x < c.width; x += 7) {
+        const std::size_t p = static_cast<std::size_t>(y) * c.width + x;
+        if (!(maps[i].depth.depth[p] > 0.0f)) continue;
+        const glm::vec3 n = maps[i].normals[p];
+        ASSERT_NEAR(glm::length(n), 1.0f, 1e-4f);
+        ASSERT_LT(glm::dot(n, glm::vec3((x + 0.5 - c.cx) / c.fx, (y + 0.5 - c.cy) / c.fy, 1.0)), 0.0f);
+      }
+  }
+  // The filter and the geometric stage matter: without them more pixels are kept, and they are worse.
+  PatchMatchOptions raw = quick_options();
+  raw.filter_min_consistent = 0;
+  raw.geometric_iterations = 0;
+  const auto unfiltered = patch_match_stereo(three_views().cam_ptrs(), three_views().image_ptrs(), three_views().ranges, raw);
+  const DepthStats f = depth_stats(maps[0].depth, three_views().truth[0], 0);
+  const DepthStats u = depth_stats(unfiltered[0].depth, three_views().truth[0], 0);
+  std::printf("unfiltered: %.1f %% kept, %.1f %% within 0.5 px\n", 100 * u.valid, 100 * u.within_half_px);
+  EXPECT_GT(u.valid, f.valid);
+  EXPECT_LT(u.within_half_px, f.within_half_px);
+}
+
+TEST(PatchMatch, FusedCloudLiesOnTheTrueSurfaces) {
+  const auto& v = three_views();
+  PatchMatchFusionOptions fo;
+  fo.pixel_stride = 1;
+  const PointCloud cloud = fuse_patch_match(v.cam_ptrs(), v.image_ptrs(), synthetic_maps(), fo);
+  ASSERT_EQ(cloud.normals.size(), cloud.size());
+  // Each point against the traced surface along its ray from the first view, as a disparity error (px)
+  // against its nearest other view.
+  const Camera& c = v.cams[0];
+  const double fB = c.fx * std::min(glm::length(v.cams[1].center_world() - c.center_world()),
+                                    glm::length(v.cams[2].center_world() - c.center_world()));
+  std::vector<double> rel;
+  std::size_t normal_ok = 0;
+  for (std::size_t k = 0; k < cloud.size(); ++k) {
+    const glm::dvec3 X(cloud.positions[k]);
+    const glm::dvec3 q = c.R_world_to_cam * X + c.t_world_to_cam;
+    const glm::dvec2 u = project(c, X);
+    if (!(q.z > 0) || u.x < 0 || u.y < 0 || u.x >= c.width || u.y >= c.height) continue;
+    const SyntheticHit hit = scene().trace(c, u.x, u.y);
+    rel.push_back(fB * std::abs(1.0 / q.z - 1.0 / hit.depth));
+    normal_ok += glm::dot(glm::dvec3(cloud.normals[k]), hit.normal) > std::cos(glm::radians(20.0));
+  }
+  ASSERT_GT(rel.size(), 5000u);
+  std::sort(rel.begin(), rel.end());
+  const double median = rel[rel.size() / 2], p90 = rel[rel.size() * 9 / 10];
+  std::printf("fused: %zu points, median disparity error %.3f px, 90th percentile %.3f px, normals within 20°: %.1f %%\n",
+              cloud.size(), median, p90, 100.0 * static_cast<double>(normal_ok) / static_cast<double>(rel.size()));
+  EXPECT_LT(median, 0.2);
+  EXPECT_LT(p90, 1.0);
+  EXPECT_GT(static_cast<double>(normal_ok) / static_cast<double>(rel.size()), 0.6);
+  // The stride keeps about 1/stride² of the points; a higher pixel minimum keeps fewer.
+  fo.pixel_stride = 4;
+  const std::size_t strided = fuse_patch_match(v.cam_ptrs(), v.image_ptrs(), synthetic_maps(), fo).size();
+  EXPECT_NEAR(static_cast<double>(strided), static_cast<double>(cloud.size()) / 16.0, 0.25 * cloud.size() / 16.0);
+  fo.pixel_stride = 1;
+  fo.min_pixels = 3;
+  EXPECT_LT(fuse_patch_match(v.cam_ptrs(), v.image_ptrs(), synthetic_maps(), fo).size(), cloud.size());
+}
+
+TEST(PatchMatchFusion, ExactMapsFuseOntoTheSurfaceAndWrongOnesDoNot) {
+  const auto& v = three_views();
+  std::vector<PatchMatchMap> maps(3);
+  for (std::size_t i = 0; i < 3; ++i) {
+    const Camera& c = v.cams[i];
+    maps[i].depth = DepthMap{c.width, c.height, v.truth[i]};
+    maps[i].normals.resize(v.truth[i].size());
+    for (int y = 0; y < c.height; ++y)
+      for (int x = 0; x < c.width; ++x)
+        maps[i].normals[static_cast<std::size_t>(y) * c.width + x] =
+            glm::vec3(c.R_world_to_cam * scene().trace(c, x + 0.5, y + 0.5).normal);
+  }
+  // View 0's depths 5 % too far: they agree with no other view, so its pixels fuse with nothing.
+  for (auto& d : maps[0].depth.depth) d *= 1.05f;
+  PatchMatchFusionOptions fo;
+  fo.pixel_stride = 1;
+  const PointCloud cloud = fuse_patch_match(v.cam_ptrs(), v.image_ptrs(), maps, fo);
+  const Camera& c = v.cams[1];
+  std::size_t on_surface = 0;
+  for (const auto& p : cloud.positions) {
+    const glm::dvec3 q = c.R_world_to_cam * glm::dvec3(p) + c.t_world_to_cam;
+    const glm::dvec2 u = project(c, glm::dvec3(p));
+    if (u.x < 0 || u.y < 0 || u.x >= c.width || u.y >= c.height) continue;
+    on_surface += std::abs(q.z - scene().trace(c, u.x, u.y).depth) < 0.005 * q.z;
+  }
+  EXPECT_GT(cloud.size(), 20000u);
+  EXPECT_GT(static_cast<double>(on_surface) / static_cast<double>(cloud.size()), 0.95);
+  // Only views 1 and 2 agree: no point has more than two pixels... except through chains; none from view 0.
+  fo.min_pixels = 3;
+  const std::size_t three = fuse_patch_match(v.cam_ptrs(), v.image_ptrs(), maps, fo).size();
+  EXPECT_LT(three, cloud.size() / 5);
+  fo.min_pixels = 0;
+  EXPECT_THROW(fuse_patch_match(v.cam_ptrs(), v.image_ptrs(), maps, fo), Error);
+}
+
+TEST(PatchMatch, SameSeedSameMapsWhateverTheThreadCount) {
+  const auto& v = three_views();
+  PatchMatchOptions o = quick_options();
+  o.iterations = 2;
+  o.geometric_iterations = 1;
+  const int threads = omp_get_max_threads();
+  omp_set_num_threads(1);
+  const auto one = patch_match_stereo(v.cam_ptrs(), v.image_ptrs(), v.ranges, o);
+  omp_set_num_threads(2);
+  const auto two = patch_match_stereo(v.cam_ptrs(), v.image_ptrs(), v.ranges, o);
+  omp_set_num_threads(threads);
+  for (std::size_t i = 0; i < 3; ++i) {
+    EXPECT_EQ(one[i].depth.depth, two[i].depth.depth);
+    EXPECT_TRUE(one[i].normals == two[i].normals);
+  }
+  o.seed = 2;
+  const auto other = patch_match_stereo(v.cam_ptrs(), v.image_ptrs(), v.ranges, o);
+  EXPECT_NE(other[0].depth.depth, one[0].depth.depth);
+}
+
+TEST(PatchMatch, BadInputsGiveOneLineErrors) {
+  const auto& v = three_views();
+  const auto expect_error = [](auto&& f, const std::string& part) {
+    try {
+      f();
+      ADD_FAILURE() << "expected an error containing " << part;
+    } catch (const Error& e) {
+      const std::string m = e.what();
+      EXPECT_NE(m.find(part), std::string::npos) << m;
+      EXPECT_EQ(m.find('\n'), std::string::npos) << m;
+    }
+  };
+  // A view without texture.
+  std::vector<Image> images = v.images;
+  images[1] = Image(images[1].width, images[1].height, 3, 0.4f);
+  std::vector<const Image*> ptrs = {&images[0], &images[1], &images[2]};
+  expect_error([&] { (void)patch_match_stereo(v.cam_ptrs(), ptrs, v.ranges, quick_options()); },
+               v.cams[1].image_name + ": the image has no texture");
+  // A bad depth range, a wrong image size, a bad option.
+  auto ranges = v.ranges;
+  ranges[2] = {5.0, 1.0};
+  expect_error([&] { (void)patch_match_stereo(v.cam_ptrs(), v.image_ptrs(), ranges, quick_options()); },
+               "invalid depth range");
+  std::vector<const Image*> small = {&v.images[0], &v.images[1], &images[0]};
+  Image tiny(10, 10, 3);
+  small[2] = &tiny;
+  expect_error([&] { (void)patch_match_stereo(v.cam_ptrs(), small, v.ranges, quick_options()); }, "image is 10x10");
+  PatchMatchOptions bad = quick_options();
+  bad.window_radius = 30;
+  expect_error([&] { (void)patch_match_stereo(v.cam_ptrs(), v.image_ptrs(), v.ranges, bad); }, "window radius");
+}
+
+TEST(TrainingGeometry, PatchMatchPipelineReadsOnlyTrainingViewsAndLiesOnTheSurfaces) {
+  // Trained at half resolution; PatchMatch runs at the folder's full resolution (images/, 252x189).
+  SceneLoadOptions lo;
+  lo.resolution = 2;
+  const Scene s = load_scene(test::small_synthetic_dir(), lo);
+  SplitOptions so;
+  so.n_views = 3;
+  const Split split = make_split(s, so);
+  TrainingGeometryOptions o;
+  o.dense_method = DenseMethod::PatchMatch;
+  EXPECT_EQ(geometry_resolution(s, o), 1);
+  TrainingGeometry g;
+  std::set<fs::path> read;
+  {
+    test::ImageReads reads;
+    g = build_training_geometry(s, split.train, o);
+    read.insert(reads.paths.begin(), reads.paths.end());
+    EXPECT_EQ(reads.paths.size(), 3u);
+  }
+  std::set<fs::path> train;
+  for (int v : split.train) train.insert(test::small_synthetic_dir() / "images" / s.cameras[static_cast<std::size_t>(v)].image_name);
+  std::set<fs::path> read_names;
+  for (const auto& p : read) read_names.insert(test::small_synthetic_dir() / "images" / p.filename());
+  EXPECT_EQ(read_names, train);
+  for (int v : split.test) EXPECT_EQ(read_names.count(test::small_synthetic_dir() / "images" / s.cameras[static_cast<std::size_t>(v)].image_name), 0u);
+  EXPECT_EQ(g.geometry_resolution, 1);
+  ASSERT_EQ(g.depth.size(), 3u);
+  EXPECT_EQ(g.depth[0].width, 252);
+  EXPECT_EQ(g.dense.normals.size(), g.dense.size());
+  // Fused points against the traced surface from the first training view (full-resolution camera).
+  const Camera& c = scene().cameras()[static_cast<std::size_t>(split.train[0])];
+  std::vector<double> rel;
+  for (const auto& p : g.dense.positions) {
+    const glm::dvec3 q = c.R_world_to_cam * glm::dvec3(p) + c.t_world_to_cam;
+    const glm::dvec2 u = project(c, glm::dvec3(p));
+    if (!(q.z > 0) || u.x < 0 || u.y < 0 || u.x >= c.width || u.y >= c.height) continue;
+    rel.push_back(std::abs(q.z - scene().trace(c, u.x, u.y).depth) / q.z);
+  }
+  ASSERT_GT(rel.size(), 500u);
+  std::sort(rel.begin(), rel.end());
+  std::printf("pipeline: %zu sparse, %zu dense points; median relative depth error %.4f\n", g.sparse.size(),
+              g.dense.size(), rel[rel.size() / 2]);
+  EXPECT_LT(rel[rel.size() / 2], 0.01);
+}
+
+TEST(TrainingGeometry, GeometryResolutionFollowsTheMethodAndTheCap) {
+  SceneLoadOptions lo;
+  lo.resolution = 8;
+  const Scene fern = load_scene(test::shared_data() / "nerf_llff_data/fern", lo);
+  TrainingGeometryOptions o;
+  EXPECT_EQ(geometry_resolution(fern, o), 8);  // SGBM: the training resolution
+  o.dense_method = DenseMethod::PatchMatch;
+  EXPECT_EQ(geometry_resolution(fern, o), 4);  // images_4/ (1008x756) is fern's largest folder here
+  o.max_image_size = 800;
+  EXPECT_EQ(geometry_resolution(fern, o), 8);
+  o.resolution = GeometryResolution::Training;
+  o.max_image_size = 1600;
+  EXPECT_EQ(geometry_resolution(fern, o), 8);
+  o.resolution = GeometryResolution::Highest;
+  o.dense_method = DenseMethod::Sgbm;
+  EXPECT_EQ(geometry_resolution(fern, o), 4);
+  EXPECT_THROW(parse_dense_method("colmap"), Error);
+  EXPECT_THROW(parse_geometry_resolution("full"), Error);
+}
+
+}  // namespace
+}  // namespace d2gs
