@@ -11,6 +11,7 @@
 #include <string>
 #include <thread>
 
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 namespace d2gs::test {
@@ -20,10 +21,13 @@ inline std::filesystem::path source_dir() { return D2GS_SOURCE_DIR; }
 inline std::filesystem::path shared_data() { return D2GS_SHARED_DATA_DIR; }
 inline std::filesystem::path cli_path() { return D2GS_CLI_PATH; }
 
-// A fresh empty folder for the running test, removed at the start of the next run with that name.
+// A fresh empty folder for the running test, removed at the start of the next run with that name. One
+// folder per build (the d2gs program's folder, hashed), so that two checkouts' test suites running at once on one
+// machine (a clone's CI beside a working tree) do not delete each other's files.
 inline std::filesystem::path scratch_dir() {
   const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-  auto dir = std::filesystem::temp_directory_path() / "d2gs-tests" /
+  const std::size_t binary = std::hash<std::string>{}(std::filesystem::path(D2GS_CLI_PATH).parent_path().string());
+  auto dir = std::filesystem::temp_directory_path() / "d2gs-tests" / fmt::format("{:08x}", binary & 0xffffffffu) /
              (std::string(info->test_suite_name()) + "." + info->name());
   std::filesystem::remove_all(dir);
   std::filesystem::create_directories(dir);
