@@ -12,6 +12,7 @@
 #include "d2gs/core/random.hpp"
 #include "d2gs/scene/scene.hpp"
 #include "d2gs/train/dropout.hpp"
+#include "d2gs/train/methods/registry.hpp"
 #include "d2gs/train/trainer.hpp"
 
 namespace {
@@ -63,7 +64,8 @@ void BM_DdDropMask(benchmark::State& state) {
 BENCHMARK(BM_DdDropMask)->Arg(10000)->Arg(40000)->Arg(100000)->Unit(benchmark::kMillisecond);
 
 void BM_TrainIteration(benchmark::State& state) {
-  const auto method = static_cast<d2gs::Method>(state.range(0));
+  // The method by its place in the registry (train/methods/registry.cpp): 0 3dgs, 1 dropgaussian, 2 d2gs.
+  const std::string method = d2gs::training_methods().at(static_cast<std::size_t>(state.range(0))).name;
   const auto dir = std::filesystem::temp_directory_path() / "d2gs-bench-train";
   std::filesystem::remove_all(dir);
   d2gs::TrainConfig c;
@@ -72,6 +74,7 @@ void BM_TrainIteration(benchmark::State& state) {
   c.resolution = 8;
   c.n_views = 3;
   c.method = method;
+  state.SetLabel(method);
   c.quiet = true;
   d2gs::Trainer trainer(c);
   for (int i = 0; i < 3; ++i) trainer.step();  // warm the workspaces

@@ -134,7 +134,7 @@ int run_demo(const DemoOptions& opt) {
   c.model_dir = run_dir.string();
   c.resolution = opt.resolution;
   c.n_views = opt.train_views;
-  c.method = Method::D2gs;
+  c.method = "d2gs";
   c.iterations = opt.iterations;
   c.seed = opt.seed;
   if (opt.init == "training-depth") {

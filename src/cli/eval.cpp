@@ -89,8 +89,7 @@ Run add_eval_command(CLI::App& app) {
       if (cj.contains("init_is_oracle") && !cj["init_is_oracle"].is_boolean())
         fail("key 'init_is_oracle' must be true or false");
       oracle = cj.value("init_is_oracle", false);
-      for (const char* recorded : {"init_is_oracle", "scene_extent", "split", "images_folder"}) cj.erase(recorded);
-      update_from_json(c, cj);
+      update_from_json(c, cj, RecordedKeys::Ignore);
     } catch (const Error& e) {
       fail_file(cfg_path, "{}", e.what());
     }
@@ -115,7 +114,7 @@ Run add_eval_command(CLI::App& app) {
     const EvalSummary summary = evaluate_views(model, scene, test, eo);
     nlohmann::json j;
     to_json(j, summary);
-    j["method"] = to_string(c.method);
+    j["method"] = c.method;
     j["iteration"] = it;
     j["gaussians"] = model.size();
     j["init_is_oracle"] = oracle;
@@ -124,7 +123,7 @@ Run add_eval_command(CLI::App& app) {
     write_file_atomic(run / "results.json", j.dump(2));
     if (*json_only) std::printf("%s\n", j.dump(2).c_str());
     else std::printf("%s(%s, iteration %d, %zu Gaussians%s)\nwritten %s\n", format_table(summary).c_str(),
-                     to_string(c.method), it, model.size(), oracle ? ", ORACLE init" : "", (run / "results.json").c_str());
+                     c.method.c_str(), it, model.size(), oracle ? ", ORACLE init" : "", (run / "results.json").c_str());
     report::write_run_report_or_warn(run);
     return 0;
   };

@@ -32,7 +32,7 @@ TEST(ExperimentConfig, FernExampleIsThreeMethodsTimesThreeSeeds) {
     EXPECT_EQ(t["resolution"], 8);
     EXPECT_EQ(t["iterations"], 10000);
     EXPECT_EQ(t["n_views"], 3);
-    EXPECT_EQ(t["model_dir"], (fs::path("/tmp/exp") / runs[k].dir).string());
+    EXPECT_EQ(t["model_path"], (fs::path("/tmp/exp") / runs[k].dir).string());
     EXPECT_EQ(t["source"], (test::shared_data() / "nerf_llff_data/fern").lexically_normal().string());
     EXPECT_EQ(t["checkpoint_iterations"].size(), 10u);  // every 1000, the last included
     EXPECT_EQ(t["checkpoint_iterations"].back(), 10000);

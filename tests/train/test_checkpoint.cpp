@@ -6,7 +6,10 @@
 
 #include <fmt/format.h>
 
+#include <nlohmann/json.hpp>
+
 #include "d2gs/core/atomic_file.hpp"
+#include "d2gs/core/checksum.hpp"
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/random.hpp"
 #include "d2gs/train/checkpoint.hpp"
@@ -58,8 +61,11 @@ TrainingState state() {
   s.exp_avg_sq = random_model(rng, 17, 1);
   s.grad_sums.assign(17, 0.25f);
   s.grad_counts.assign(17, 3.0f);
-  s.density_cache.assign(15, 0.5f);  // out of step with the model, as the release's cache may be
-  s.dafe_masks = {std::vector<std::uint8_t>(48, 1), {}, std::vector<std::uint8_t>(48, 0)};
+  // A method's state: D²GS's density cache (out of step with the model, as the release's cache may be)
+  // and its DAFE masks, and an empty group.
+  s.method.floats["density_cache"] = {std::vector<float>(15, 0.5f)};
+  s.method.floats["empty"] = {};
+  s.method.bytes["dafe_masks"] = {std::vector<std::uint8_t>(48, 1), {}, std::vector<std::uint8_t>(48, 0)};
   return s;
 }
 
@@ -76,7 +82,7 @@ TEST(Checkpoint, RoundTripIsExact) {
   const RunIdentity r = identity();
   const TrainingState s = state();
   const std::string bytes = encode_checkpoint(r, s);
-  EXPECT_EQ(bytes.substr(0, 10), "D2GSCKPT2\n");
+  EXPECT_EQ(bytes.substr(0, 10), "D2GSCKPT3\n");
   const Checkpoint c = decode_checkpoint(bytes, "x.bin");
   EXPECT_EQ(c.run.scene, r.scene);
   EXPECT_EQ(c.run.images_folder, r.images_folder);
@@ -103,8 +109,8 @@ TEST(Checkpoint, RoundTripIsExact) {
   }
   EXPECT_EQ(t.grad_sums, s.grad_sums);
   EXPECT_EQ(t.grad_counts, s.grad_counts);
-  EXPECT_EQ(t.density_cache, s.density_cache);
-  EXPECT_EQ(t.dafe_masks, s.dafe_masks);
+  EXPECT_EQ(t.method, s.method);
+  EXPECT_EQ(t.method.floats.at("empty").size(), 0u);
   EXPECT_EQ(encode_checkpoint(c.run, c.state), bytes);  // and back to the same bytes
 
   // Through a file, written atomically.
@@ -151,8 +157,8 @@ TEST(Checkpoint, FormatNumbers) {
   EXPECT_EQ(error_of([&] { (void)decode_checkpoint("D2GSCKPT1\n" + bytes.substr(10), "c.bin"); }),
             "c.bin: checkpoint format 1 (written by d2gs before 2026-11-25) records neither the scene nor the split it was "
             "trained on, so a resume from it cannot be checked; train the run again");
-  EXPECT_EQ(error_of([&] { (void)decode_checkpoint("D2GSCKPT3\n" + bytes.substr(10), "c.bin"); }),
-            "c.bin: checkpoint format 3 is not one this d2gs reads (format 2)");
+  EXPECT_EQ(error_of([&] { (void)decode_checkpoint("D2GSCKPT4\n" + bytes.substr(10), "c.bin"); }),
+            "c.bin: checkpoint format 4 is not one this d2gs reads (formats 2 and 3)");
   for (const char* other : {"", "D2GS", "D2GSCKPT", "D2GSCKPT\n", "D2GSCKPTx\n", "D2GSCKPT12345678\n", "ply\nformat"})
     EXPECT_EQ(error_of([&] { (void)decode_checkpoint(other, "c.bin"); }), "c.bin: not a d2gs checkpoint") << other;
 }
@@ -197,12 +203,56 @@ TEST(Checkpoint, ResumeRules) {
   c.state.camera_stack = {1, 1};
   EXPECT_EQ(refused(r), "c.bin: cannot resume: its camera queue names training view position 1 of 3");
   c.state.camera_stack = {};
-  c.state.dafe_masks.pop_back();
-  EXPECT_EQ(refused(r), "c.bin: cannot resume: it holds 2 DAFE masks for 3 training views");
-  c.state.dafe_masks = {std::vector<std::uint8_t>(48, 1), std::vector<std::uint8_t>(47, 1), {}};
-  EXPECT_EQ(refused(r), "c.bin: cannot resume: its DAFE mask of training view 10 has 47 pixels, the view 48");
-  c.state.dafe_masks.clear();  // none yet: allowed
   EXPECT_EQ(check_resume("c.bin", c, r, 100), "");
+}
+
+// A format-2 checkpoint (d2gs before the methods seam): D²GS's density cache and DAFE masks sat at fixed
+// places after the densification statistics; they are read into the method's state groups, and a
+// checkpoint of another method (both empty) has none.
+std::string format2_bytes(const RunIdentity& r, TrainingState s, const std::vector<float>& density,
+                          const std::vector<std::vector<std::uint8_t>>& masks) {
+  s.method = {};
+  const std::string v3 = encode_checkpoint(r, s);
+  std::uint64_t header_bytes = 0;
+  std::memcpy(&header_bytes, v3.data() + 10, 8);
+  nlohmann::json header = nlohmann::json::parse(v3.substr(18, header_bytes));
+  std::string body = v3.substr(18 + header_bytes, v3.size() - 18 - header_bytes - 4);
+  const auto put = [&body](const void* data, std::uint64_t count, std::size_t size) {
+    body.append(reinterpret_cast<const char*>(&count), 8);
+    body.append(static_cast<const char*>(data), count * size);
+  };
+  put(density.data(), density.size(), sizeof(float));
+  for (const auto& m : masks) put(m.data(), m.size(), 1);
+  header["format"] = 2;
+  header["body_bytes"] = body.size();
+  header["state"].erase("method_state");
+  header["state"]["dafe_masks"] = masks.size();
+  const std::string text = header.dump();
+  std::string out = "D2GSCKPT2\n";
+  const std::uint64_t n = text.size();
+  out.append(reinterpret_cast<const char*>(&n), 8);
+  out += text + body;
+  const std::uint32_t crc = crc32(out);
+  out.append(reinterpret_cast<const char*>(&crc), 4);
+  return out;
+}
+
+TEST(Checkpoint, Format2StillLoads) {
+  const RunIdentity r = identity();
+  const TrainingState s = state();
+  const std::vector<float> density(15, 0.5f);
+  const std::vector<std::vector<std::uint8_t>> masks = {std::vector<std::uint8_t>(48, 1), {}, {}};
+  const Checkpoint d2gs = decode_checkpoint(format2_bytes(r, s, density, masks), "old.bin");
+  EXPECT_EQ(d2gs.state.model.means, s.model.means);
+  EXPECT_EQ(d2gs.state.grad_counts, s.grad_counts);
+  EXPECT_EQ(d2gs.state.method.floats.at("density_cache"), std::vector<std::vector<float>>{density});
+  EXPECT_EQ(d2gs.state.method.bytes.at("dafe_masks"), masks);
+  // 3DGS: an empty cache and a mask slot per view, all empty: no state.
+  const Checkpoint gs3d = decode_checkpoint(format2_bytes(r, s, {}, {{}, {}, {}}), "old.bin");
+  EXPECT_TRUE(gs3d.state.method.floats.empty());
+  EXPECT_TRUE(gs3d.state.method.bytes.empty());
+  // Re-encoded, it is format 3.
+  EXPECT_EQ(encode_checkpoint(d2gs.run, d2gs.state).substr(0, 10), "D2GSCKPT3\n");
 }
 
 }  // namespace

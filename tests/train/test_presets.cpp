@@ -10,25 +10,25 @@ TEST(Presets, PaperAndRelease) {
   TrainConfig c;
   // The defaults are the release preset's values (chosen by measurement, docs/training.md).
   EXPECT_EQ(c.dd_drop.depth_mode, DepthMode::ReleaseDot);
-  EXPECT_TRUE(c.release_density_cache);
+  EXPECT_TRUE(c.dd_drop.release_density_cache);
   EXPECT_DOUBLE_EQ(c.dd_drop.weight_depth, 0.3);
   EXPECT_DOUBLE_EQ(c.dd_drop.weight_density, 0.7);
   EXPECT_DOUBLE_EQ(c.dd_drop.rate_min, 0.05);
   EXPECT_DOUBLE_EQ(c.dd_drop.rate_max, 0.3);
-  EXPECT_EQ(c.dafe_loss_form, DafeLossForm::Release);
+  EXPECT_EQ(c.dafe.loss_form, DafeLossForm::Release);
   apply_d2gs_preset(c, "paper");
   apply_d2gs_preset(c, "release");
   EXPECT_EQ(c.dd_drop.depth_mode, DepthMode::ReleaseDot);
-  EXPECT_TRUE(c.release_density_cache);
+  EXPECT_TRUE(c.dd_drop.release_density_cache);
   EXPECT_DOUBLE_EQ(c.dd_drop.weight_depth, 0.3);
   EXPECT_DOUBLE_EQ(c.dd_drop.weight_density, 0.7);
-  EXPECT_EQ(c.dafe_loss_form, DafeLossForm::Release);
+  EXPECT_EQ(c.dafe.loss_form, DafeLossForm::Release);
   apply_d2gs_preset(c, "paper");
   EXPECT_EQ(c.dd_drop.depth_mode, DepthMode::Euclidean);
-  EXPECT_FALSE(c.release_density_cache);
+  EXPECT_FALSE(c.dd_drop.release_density_cache);
   EXPECT_DOUBLE_EQ(c.dd_drop.weight_depth, 0.5);
-  EXPECT_DOUBLE_EQ(c.dafe_tau, 5.0);
-  EXPECT_EQ(c.dafe_loss_form, DafeLossForm::Paper);
+  EXPECT_DOUBLE_EQ(c.dafe.tau, 5.0);
+  EXPECT_EQ(c.dafe.loss_form, DafeLossForm::Paper);
   EXPECT_THROW(apply_d2gs_preset(c, "best"), Error);
 }
 
@@ -37,14 +37,14 @@ TEST(Presets, SceneValuesOfTheRelease) {
   apply_scene_preset(c, "fern");
   EXPECT_DOUBLE_EQ(c.dd_drop.weight_depth, 0.7);
   EXPECT_DOUBLE_EQ(c.dd_drop.rate_min, 0.1);
-  EXPECT_DOUBLE_EQ(c.dafe_tau, 10.0);
-  EXPECT_FLOAT_EQ(c.dafe_lambda, 1.0f);
+  EXPECT_DOUBLE_EQ(c.dafe.tau, 10.0);
+  EXPECT_FLOAT_EQ(c.dafe.lambda, 1.0f);
   apply_scene_preset(c, "llff/leaves");
   EXPECT_DOUBLE_EQ(c.dd_drop.rate_max, 0.5);
-  EXPECT_FLOAT_EQ(c.dafe_lambda, 0.25f);
+  EXPECT_FLOAT_EQ(c.dafe.lambda, 0.25f);
   apply_scene_preset(c, "mipnerf360/garden");
   EXPECT_DOUBLE_EQ(c.dd_drop.rate_max, 0.7);
-  EXPECT_DOUBLE_EQ(c.dafe_tau, 15.0);
+  EXPECT_DOUBLE_EQ(c.dafe.tau, 15.0);
   EXPECT_THROW(apply_scene_preset(c, "room"), Error);  // LLFF and Mip-NeRF 360 both have a room
   EXPECT_THROW(apply_scene_preset(c, "lego"), Error);
   EXPECT_EQ(d2gs_scene_presets().size(), 15u);

@@ -31,7 +31,7 @@ TrainConfig small_run(const fs::path& out, int iterations) {
   c.model_dir = out.string();
   c.resolution = 8;
   c.n_views = 3;
-  c.method = Method::Gs3d;
+  c.method = "3dgs";
   c.iterations = iterations;
   c.quiet = true;
   c.seed = 1;
@@ -132,7 +132,7 @@ TEST(Resume, RefusesAnotherSceneResolutionSplitOrConfigurationAndLeavesTheRunAlo
          c.test_views = {0, 8};
        },
        "its test views were [0, 8, 16], this run's are [0, 8]"},
-      {"another method", [](TrainConfig& c) { c.method = Method::D2gs; },
+      {"another method", [](TrainConfig& c) { c.method = "d2gs"; },
        "it was trained with method = \"3dgs\", this run has \"d2gs\""},
       {"another seed", [](TrainConfig& c) { c.seed = 2; }, "it was trained with seed = 1, this run has 2"},
       {"another SH degree", [](TrainConfig& c) { c.sh_degree = 2; }, "it was trained with sh_degree = 3, this run has 2"},
@@ -179,7 +179,7 @@ TEST(Resume, FromTheRunsOwnConfigJson) {
                                                "--quiet", fern(), run.string()));
   ASSERT_EQ(first.exit_code, 0) << first.output;
   const auto saved = nlohmann::json::parse(read_file(run / "config.json"));
-  ASSERT_EQ(fs::path(saved["dafe_prior_dir"].get<std::string>()), run / "init/depth");
+  ASSERT_EQ(fs::path(saved["dafe_prior"].get<std::string>()), run / "init/depth");
   ASSERT_EQ(saved["dafe_prior_kind"], "depth");
   const std::string model = read_file(run / "point_cloud/iteration_4/point_cloud.ply");
   const auto again = test::run_cli(fmt::format("-q train --config '{}' --resume '{}'", (run / "config.json").string(),

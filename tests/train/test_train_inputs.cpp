@@ -57,7 +57,7 @@ TEST(TrainConfigJson, NumbersAreTypeAndRangeChecked) {
                           R"({"iterations": 2147483647, "seed": 18446744073709551615, "dafe_tau": 7, "resolution": 4})"));
   EXPECT_EQ(c.iterations, 2147483647);
   EXPECT_EQ(c.seed, UINT64_MAX);
-  EXPECT_DOUBLE_EQ(c.dafe_tau, 7.0);
+  EXPECT_DOUBLE_EQ(c.dafe.tau, 7.0);
   EXPECT_EQ(c.resolution, 4);
 }
 

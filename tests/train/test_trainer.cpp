@@ -21,7 +21,7 @@ namespace d2gs {
 namespace {
 namespace fs = std::filesystem;
 
-TrainConfig fern_config(const fs::path& out, Method method, int iterations) {
+TrainConfig fern_config(const fs::path& out, const std::string& method, int iterations) {
   TrainConfig c;
   c.source = (test::shared_data() / "nerf_llff_data/fern").string();
   c.model_dir = out.string();
@@ -36,7 +36,7 @@ TrainConfig fern_config(const fs::path& out, Method method, int iterations) {
 
 TEST(Trainer, TestPsnrRisesWellAboveTheInitialRender) {
   const auto dir = test::scratch_dir();
-  auto cfg = fern_config(dir / "run", Method::Gs3d, 300);
+  auto cfg = fern_config(dir / "run", "3dgs", 300);
   cfg.densify_from = 100;  // densify within the short schedule
   cfg.init = "sfm-all-views";  // the labelled oracle (the default is the training views' own geometry)
   Trainer trainer(cfg);
@@ -64,7 +64,7 @@ TEST(Trainer, TestPsnrRisesWellAboveTheInitialRender) {
 
 TEST(Trainer, SameSeedSameModelAndResumeIsBitIdentical) {
   const auto dir = test::scratch_dir();
-  auto cfg = fern_config(dir / "a", Method::DropGaussian, 40);
+  auto cfg = fern_config(dir / "a", "dropgaussian", 40);
   cfg.densify_from = 10;
   cfg.densify_every = 10;
   cfg.opacity_reset_at = {25};
@@ -101,7 +101,7 @@ TEST(Trainer, SameSeedSameModelAndResumeIsBitIdentical) {
 
 TEST(Trainer, D2gsDropsNearDenseGaussiansAndRuns) {
   const auto dir = test::scratch_dir();
-  auto cfg = fern_config(dir / "run", Method::D2gs, 12);
+  auto cfg = fern_config(dir / "run", "d2gs", 12);
   cfg.dd_drop.rate_min = 0.3;  // make the drop visible in a short run
   Trainer t(cfg);
   double dropped = 0;
@@ -113,18 +113,18 @@ TEST(Trainer, D2gsDropsNearDenseGaussiansAndRuns) {
 TEST(Trainer, RefusesToOverwriteAndRejectsBadCheckpoints) {
   const auto dir = test::scratch_dir();
   write_file_atomic(dir / "user/notes.txt", "precious");
-  EXPECT_THROW(Trainer(fern_config(dir / "user", Method::Gs3d, 5)), Error);
+  EXPECT_THROW(Trainer(fern_config(dir / "user", "3dgs", 5)), Error);
   EXPECT_EQ(read_file(dir / "user/notes.txt"), "precious");
   write_file_atomic(dir / "bad.bin", "not a checkpoint");
-  EXPECT_THROW(Trainer(fern_config(dir / "r", Method::Gs3d, 5), dir / "bad.bin"), Error);
-  auto cfg = fern_config(dir / "x", Method::Gs3d, 5);
+  EXPECT_THROW(Trainer(fern_config(dir / "r", "3dgs", 5), dir / "bad.bin"), Error);
+  auto cfg = fern_config(dir / "x", "3dgs", 5);
   cfg.resolution = 3;
   EXPECT_THROW(Trainer{cfg}, Error);
 }
 
 TEST(Trainer, RandomInitLiesInTheTrainingFrustaAndIsNotAnOracle) {
   const auto dir = test::scratch_dir();
-  auto cfg = fern_config(dir / "run", Method::Gs3d, 3);
+  auto cfg = fern_config(dir / "run", "3dgs", 3);
   cfg.init = "random";
   cfg.random_points = 3000;
   Trainer t(cfg);
@@ -168,9 +168,9 @@ TEST(Trainer, RandomInitLiesInTheTrainingFrustaAndIsNotAnOracle) {
 
 TEST(Trainer, DefaultInitIsTheTrainingViewsGeometryWithStereoDepthPriors) {
   const auto dir = test::scratch_dir();
-  auto cfg = fern_config(dir / "run", Method::D2gs, 2);
+  auto cfg = fern_config(dir / "run", "d2gs", 2);
   ASSERT_EQ(cfg.init, "dense");  // the default
-  cfg.dafe_prior_dir = "stereo";
+  cfg.dafe.prior = "stereo";
   Trainer t(cfg);
   EXPECT_FALSE(t.init_is_oracle());
   const auto manifest = nlohmann::json::parse(read_file(dir / "run/init/init.json"));
@@ -178,13 +178,13 @@ TEST(Trainer, DefaultInitIsTheTrainingViewsGeometryWithStereoDepthPriors) {
   EXPECT_EQ(t.model().size(), manifest["dense_points"].get<std::size_t>());
   EXPECT_GT(t.model().size(), 10000u);
   EXPECT_EQ(read_point_cloud_ply(dir / "run/input.ply").size(), t.model().size());
-  EXPECT_EQ(t.config().dafe_prior_kind, PriorKind::Depth);
-  EXPECT_EQ(fs::path(t.config().dafe_prior_dir), dir / "run/init/depth");
+  EXPECT_EQ(t.config().dafe.prior_kind, PriorKind::Depth);
+  EXPECT_EQ(fs::path(t.config().dafe.prior), dir / "run/init/depth");
   t.step();
   t.step();
   EXPECT_EQ(t.iteration(), 2);
   // --init sparse: the triangulated SIFT points of the same (cached) geometry.
-  auto sparse = fern_config(dir / "sparse", Method::Gs3d, 1);
+  auto sparse = fern_config(dir / "sparse", "3dgs", 1);
   sparse.init = "sparse";
   Trainer ts(sparse);
   EXPECT_FALSE(ts.init_is_oracle());
@@ -196,7 +196,7 @@ TEST(Trainer, SavesAndTestsBeforeTheIterationsOpacityReset) {
   // As the original train.py: the model saved and scored at iteration t is the one before t's densification,
   // opacity reset and optimiser step. After a reset every opacity is <= 0.01 and the test PSNR collapses.
   const auto dir = test::scratch_dir();
-  auto cfg = fern_config(dir / "run", Method::Gs3d, 6);
+  auto cfg = fern_config(dir / "run", "3dgs", 6);
   cfg.opacity_reset_at = {3};
   cfg.densify_from = 1000;
   cfg.save_iterations = {2, 3, 6};
@@ -285,11 +285,11 @@ TEST(TrainConfig, JsonRoundTripAndUnknownKeys) {
   TrainConfig c;
   c.source = "s";
   c.model_dir = "m";
-  c.method = Method::D2gs;
+  c.method = "d2gs";
   c.image_source = ImageSource::Largest;  // not the default
   c.alpha_clamp_pass_through = true;       // not the default
   c.dd_drop.weight_depth = 0.7;
-  c.dafe_loss_form = DafeLossForm::Paper;  // not the default
+  c.dafe.loss_form = DafeLossForm::Paper;  // not the default
   c.opacity_reset_at = {100};
   nlohmann::json j;
   to_json(j, c);

@@ -11,6 +11,8 @@
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/json_value.hpp"
 #include "d2gs/train/config.hpp"
+#include "d2gs/train/methods/registry.hpp"
+#include "d2gs/train/options.hpp"
 #include "d2gs/train/presets.hpp"
 
 namespace d2gs::experiment {
@@ -27,9 +29,9 @@ bool safe_name(const std::string& s) {
   });
 }
 
-// Keys the experiment sets itself for every run.
-constexpr const char* kReservedKeys[] = {"source", "model_dir", "n_views", "seed", "method", "checkpoint_iterations",
-                                         "init_is_oracle", "scene_extent", "split", "images_folder"};
+// Options the experiment sets itself for every run (or their former names), and the keys a run's
+// config.json records beside its options.
+constexpr const char* kReservedKeys[] = {"source", "model_path", "n_views", "seed", "method", "checkpoint_iterations"};
 
 void check_keys(const nlohmann::json& j, std::initializer_list<const char*> allowed, const fs::path& file,
                 const std::string& where) {
@@ -42,9 +44,13 @@ void check_keys(const nlohmann::json& j, std::initializer_list<const char*> allo
 
 void check_train_keys(const nlohmann::json& j, const fs::path& file, const std::string& where) {
   if (!j.is_object()) fail_file(file, "{} must be an object of d2gs train config keys", where);
-  for (const auto& [key, value] : j.items())
+  for (const auto& [key, value] : j.items()) {
+    const TrainOption* option = find_train_option(key);
     for (const char* reserved : kReservedKeys)
-      if (key == reserved) fail_file(file, "{} sets '{}', which the experiment sets for each run", where, key);
+      if (option && option->name == reserved) fail_file(file, "{} sets '{}', which the experiment sets for each run", where, key);
+    for (const char* recorded : kRecordedKeys)
+      if (key == recorded) fail_file(file, "{} sets '{}', which the experiment sets for each run", where, key);
+  }
   TrainConfig probe;
   try {
     update_from_json(probe, j);
@@ -142,7 +148,7 @@ ExperimentConfig parse_experiment_config(const nlohmann::json& j, const fs::path
     MethodSpec spec;
     spec.method = get<std::string>(m, "method", "", file, "a method");
     try {
-      method_from_string(spec.method);
+      check_method_name(spec.method);
     } catch (const Error& e) {
       fail_file(file, "{}", e.what());
     }
@@ -223,7 +229,7 @@ std::vector<RunSpec> expand_runs(const ExperimentConfig& config, const fs::path&
             c.model_dir = (root / r.dir).string();
             c.n_views = views;
             c.seed = seed;
-            c.method = method_from_string(m.method);
+            c.method = m.method;
             std::vector<int> checkpoints;
             for (int it = config.checkpoint_every; it < c.iterations; it += config.checkpoint_every)
               checkpoints.push_back(it);

@@ -14,6 +14,7 @@
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/checksum.hpp"
 #include "d2gs/core/error.hpp"
+#include "d2gs/train/options.hpp"
 
 namespace d2gs {
 namespace fs = std::filesystem;
@@ -53,12 +54,6 @@ std::vector<T> integers(const json& j) {
 }
 
 // ---- the identity of a run ----
-
-// The keys of config.json that are not part of RunIdentity::options (see checkpoint.hpp).
-constexpr const char* kNotCompared[] = {"source",          "model_dir",       "resolution",
-                                        "n_views",         "train_views",     "test_views",
-                                        "iterations",      "save_iterations", "checkpoint_iterations",
-                                        "test_iterations", "log_every",       "quiet"};
 
 std::string absolute_path(const std::string& p) {
   std::error_code ec;
@@ -197,12 +192,15 @@ RunIdentity run_identity(const Scene& scene, const Split& split, const TrainConf
     r.train_images.push_back(c.image_name);
     r.train_sizes.push_back({c.width, c.height});
   }
-  to_json(r.options, config);
-  for (const char* key : kNotCompared) r.options.erase(key);
-  static const std::set<std::string> init_keywords = {"dense", "sparse", "random", "sfm-all-views"};
-  if (!init_keywords.count(config.init)) r.options["init"] = absolute_path(config.init);
-  if (!config.dafe_prior_dir.empty() && config.dafe_prior_dir != "stereo")
-    r.options["dafe_prior_dir"] = absolute_path(config.dafe_prior_dir);
+  // The options that change the training (options.hpp, OptionRole::Training), paths made absolute.
+  for (const TrainOption& o : train_options()) {
+    if (o.role != OptionRole::Training) continue;
+    nlohmann::json value = o.get(config);
+    if (o.kind == OptionKind::Path && value.is_string() &&
+        std::find(o.keywords.begin(), o.keywords.end(), value.get<std::string>()) == o.keywords.end())
+      value = absolute_path(value.get<std::string>());
+    r.options[o.name] = std::move(value);
+  }
   return r;
 }
 
@@ -210,8 +208,17 @@ std::string encode_checkpoint(const RunIdentity& run, const TrainingState& s) {
   std::uint64_t body_bytes = 0;
   for (const Gaussians* g : {&s.model, &s.exp_avg, &s.exp_avg_sq})
     for (const auto* a : attributes(*g)) body_bytes += array_bytes(*a);
-  for (const auto* a : {&s.grad_sums, &s.grad_counts, &s.density_cache}) body_bytes += array_bytes(*a);
-  for (const auto& m : s.dafe_masks) body_bytes += array_bytes(m);
+  for (const auto* a : {&s.grad_sums, &s.grad_counts}) body_bytes += array_bytes(*a);
+  // The method's state: its float groups, then its byte groups, each by name.
+  json groups = json::array();
+  for (const auto& [name, arrays] : s.method.floats) {
+    groups.push_back({{"name", name}, {"type", "f32"}, {"arrays", arrays.size()}});
+    for (const auto& a : arrays) body_bytes += array_bytes(a);
+  }
+  for (const auto& [name, arrays] : s.method.bytes) {
+    groups.push_back({{"name", name}, {"type", "u8"}, {"arrays", arrays.size()}});
+    for (const auto& a : arrays) body_bytes += array_bytes(a);
+  }
 
   const json header = {
       {"format", kCheckpointFormat},
@@ -229,7 +236,7 @@ std::string encode_checkpoint(const RunIdentity& run, const TrainingState& s) {
         {"rng_densify", rng_to_json(s.rng_densify)},
         {"gaussians", s.model.size()},
         {"sh_degree", s.model.sh_degree},
-        {"dafe_masks", s.dafe_masks.size()}}}};
+        {"method_state", std::move(groups)}}}};
   const std::string text = header.dump();
   const std::string magic = fmt::format("{}{}\n", kMagicPrefix, kCheckpointFormat);
   const std::uint64_t header_bytes = text.size();
@@ -241,8 +248,11 @@ std::string encode_checkpoint(const RunIdentity& run, const TrainingState& s) {
   out += text;
   for (const Gaussians* g : {&s.model, &s.exp_avg, &s.exp_avg_sq})
     for (const auto* a : attributes(*g)) put_array(out, *a);
-  for (const auto* a : {&s.grad_sums, &s.grad_counts, &s.density_cache}) put_array(out, *a);
-  for (const auto& m : s.dafe_masks) put_array(out, m);
+  for (const auto* a : {&s.grad_sums, &s.grad_counts}) put_array(out, *a);
+  for (const auto& [name, arrays] : s.method.floats)
+    for (const auto& a : arrays) put_array(out, a);
+  for (const auto& [name, arrays] : s.method.bytes)
+    for (const auto& a : arrays) put_array(out, a);
   const std::uint32_t crc = crc32(out);
   out.append(reinterpret_cast<const char*>(&crc), sizeof crc);
   return out;
@@ -261,8 +271,8 @@ Checkpoint decode_checkpoint(std::string_view bytes, const fs::path& source) {
   if (format == 1)
     fail_file(source, "checkpoint format 1 (written by d2gs before 2026-11-25) records neither the scene nor the split "
                       "it was trained on, so a resume from it cannot be checked; train the run again");
-  if (format != kCheckpointFormat)
-    fail_file(source, "checkpoint format {} is not one this d2gs reads (format {})", format, kCheckpointFormat);
+  if (format != kCheckpointFormat && format != 2)
+    fail_file(source, "checkpoint format {} is not one this d2gs reads (formats 2 and {})", format, kCheckpointFormat);
 
   // Sizes, then the checksum over everything before it.
   std::size_t pos = newline + 1;
@@ -300,6 +310,12 @@ Checkpoint decode_checkpoint(std::string_view bytes, const fs::path& source) {
   Checkpoint c;
   TrainingState& s = c.state;
   std::size_t gaussians = 0, masks = 0;
+  struct Group {
+    std::string name;
+    bool f32 = true;
+    std::size_t arrays = 0;
+  };
+  std::vector<Group> groups;
   int sh_degree = 0;
   try {
     c.run = run_from_json(h.at("run"));
@@ -316,7 +332,21 @@ Checkpoint decode_checkpoint(std::string_view bytes, const fs::path& source) {
     s.rng_densify = rng_from_json(st.at("rng_densify"));
     gaussians = integer<std::size_t>(st.at("gaussians"));
     sh_degree = integer<int>(st.at("sh_degree"));
-    masks = integer<std::size_t>(st.at("dafe_masks"));
+    if (format == 2) {
+      masks = integer<std::size_t>(st.at("dafe_masks"));
+    } else {
+      const json& g = st.at("method_state");
+      if (!g.is_array()) throw std::invalid_argument("method_state is not a list");
+      std::set<std::string> names;
+      for (const json& e : g) {
+        Group group{e.at("name").get<std::string>(), true, integer<std::size_t>(e.at("arrays"))};
+        const std::string type = e.at("type").get<std::string>();
+        if (type != "f32" && type != "u8") throw std::invalid_argument("method state type '" + type + "'");
+        group.f32 = type == "f32";
+        if (!names.insert(group.name).second) throw std::invalid_argument("method state '" + group.name + "' twice");
+        groups.push_back(std::move(group));
+      }
+    }
   } catch (const std::exception& e) {
     fail_file(source, "damaged checkpoint header ({})", e.what());
   }
@@ -334,9 +364,29 @@ Checkpoint decode_checkpoint(std::string_view bytes, const fs::path& source) {
   s.grad_counts = r.array<float>("grad_counts");
   if (s.grad_sums.size() != gaussians || s.grad_counts.size() != gaussians)
     fail_file(source, "damaged checkpoint: the densification statistics do not have one value per Gaussian");
-  s.density_cache = r.array<float>("density_cache");
-  if (masks > r.bytes.size()) fail_file(source, "damaged checkpoint: {} DAFE masks claimed", masks);
-  for (std::size_t k = 0; k < masks; ++k) s.dafe_masks.push_back(r.array<std::uint8_t>(fmt::format("dafe_masks[{}]", k)));
+  if (format == 2) {
+    // D²GS's density cache and DAFE masks at their fixed places; as that method's state groups when
+    // they hold anything (every format-2 checkpoint has them, empty for the other methods).
+    std::vector<float> density_cache = r.array<float>("density_cache");
+    if (masks > r.bytes.size()) fail_file(source, "damaged checkpoint: {} DAFE masks claimed", masks);
+    std::vector<std::vector<std::uint8_t>> dafe_masks;
+    for (std::size_t k = 0; k < masks; ++k) dafe_masks.push_back(r.array<std::uint8_t>(fmt::format("dafe_masks[{}]", k)));
+    if (!density_cache.empty()) s.method.floats["density_cache"] = {std::move(density_cache)};
+    if (std::any_of(dafe_masks.begin(), dafe_masks.end(), [](const auto& m) { return !m.empty(); }))
+      s.method.bytes["dafe_masks"] = std::move(dafe_masks);
+  }
+  for (const Group& g : groups) {
+    if (g.arrays > r.bytes.size()) fail_file(source, "damaged checkpoint: {} arrays claimed for {}", g.arrays, g.name);
+    for (std::size_t k = 0; k < g.arrays; ++k) {
+      const std::string name = fmt::format("{}[{}]", g.name, k);
+      if (g.f32) s.method.floats[g.name].push_back(r.array<float>(name));
+      else s.method.bytes[g.name].push_back(r.array<std::uint8_t>(name));
+    }
+    if (g.arrays == 0) {  // an empty group is kept as one
+      if (g.f32) s.method.floats[g.name];
+      else s.method.bytes[g.name];
+    }
+  }
   if (r.pos != r.bytes.size())
     fail_file(source, "damaged checkpoint: {} body bytes left over after the last array", r.bytes.size() - r.pos);
   return c;
@@ -387,19 +437,21 @@ std::string check_resume(const fs::path& source, const Checkpoint& checkpoint, c
   }
   if (was.test_views != run.test_views)
     refuse("its test views were {}, this run's are {}", join(was.test_views), join(run.test_views));
-  // The options: the method, seed and SH degree first, then the others by name.
+  // The options under their current names (a checkpoint may use former ones): the method, seed and SH
+  // degree first, then the others by name.
+  const json was_options = with_current_names(was.options), run_options = with_current_names(run.options);
   std::vector<std::string> keys = {"method", "seed", "sh_degree"};
   std::set<std::string> rest;
-  for (const auto& [key, value] : was.options.items()) rest.insert(key);
-  for (const auto& [key, value] : run.options.items()) rest.insert(key);
+  for (const auto& [key, value] : was_options.items()) rest.insert(key);
+  for (const auto& [key, value] : run_options.items()) rest.insert(key);
   for (const auto& k : keys) rest.erase(k);
   keys.insert(keys.end(), rest.begin(), rest.end());
   for (const auto& key : keys) {
-    const bool in_was = was.options.contains(key), in_run = run.options.contains(key);
-    if (in_was && in_run && was.options.at(key) == run.options.at(key)) continue;
+    const bool in_was = was_options.contains(key), in_run = run_options.contains(key);
+    if (in_was && in_run && was_options.at(key) == run_options.at(key)) continue;
     if (!in_was && !in_run) continue;
-    refuse("it was trained with {} = {}, this run has {}", key, in_was ? was.options.at(key).dump() : "(no such option)",
-           in_run ? run.options.at(key).dump() : "(no such option)");
+    refuse("it was trained with {} = {}, this run has {}", key, in_was ? was_options.at(key).dump() : "(no such option)",
+           in_run ? run_options.at(key).dump() : "(no such option)");
   }
   // How far to train.
   if (iterations < s.iteration)
@@ -416,13 +468,6 @@ std::string check_resume(const fs::path& source, const Checkpoint& checkpoint, c
     if (v < 0 || static_cast<std::size_t>(v) >= views || queued[static_cast<std::size_t>(v)])
       refuse("its camera queue names training view position {} of {}", v, views);
     queued[static_cast<std::size_t>(v)] = true;
-  }
-  if (!s.dafe_masks.empty() && s.dafe_masks.size() != views)
-    refuse("it holds {} DAFE masks for {} training views", s.dafe_masks.size(), views);
-  for (std::size_t k = 0; k < s.dafe_masks.size(); ++k) {
-    const std::size_t pixels = static_cast<std::size_t>(run.train_sizes[k][0]) * static_cast<std::size_t>(run.train_sizes[k][1]);
-    if (!s.dafe_masks[k].empty() && s.dafe_masks[k].size() != pixels)
-      refuse("its DAFE mask of training view {} has {} pixels, the view {}", run.train_views[k], s.dafe_masks[k].size(), pixels);
   }
   if (run.options.contains("sh_degree") && run.options.at("sh_degree") != s.model.sh_degree)
     refuse("its model has SH degree {}, this run trains degree {}", s.model.sh_degree, run.options.at("sh_degree").dump());

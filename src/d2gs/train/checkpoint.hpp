@@ -1,5 +1,5 @@
 #pragma once
-// Training checkpoints (chkpntN.bin, format 2): the whole state of a run after an iteration, so that
+// Training checkpoints (chkpntN.bin, format 3): the whole state of a run after an iteration, so that
 // `--resume` continues it bit-identically, and what the run was trained on (scene, resolution, split,
 // image names and sizes, every option that changes the training), so that a resume refuses anything else
 // with one line naming the checkpoint and the first difference. A CRC-32 over the file finds damage.
@@ -7,6 +7,7 @@
 #include <array>
 #include <cstdint>
 #include <filesystem>
+#include <map>
 #include <string>
 #include <string_view>
 #include <utility>
@@ -22,7 +23,9 @@
 
 namespace d2gs {
 
-inline constexpr int kCheckpointFormat = 2;
+// Format 3 keeps the training method's state as named groups of arrays (MethodState); format 2, which
+// had D²GS's density cache and DAFE masks in fixed places, is still read (into those two groups).
+inline constexpr int kCheckpointFormat = 3;
 
 // What a run trains on. A checkpoint continues only a run with an equal identity.
 struct RunIdentity {
@@ -34,13 +37,23 @@ struct RunIdentity {
   std::vector<int> train_views, test_views;   // the split (global indices)
   std::vector<std::string> train_images;      // image names of the training views, in split order
   std::vector<std::array<int, 2>> train_sizes;  // width, height of each training view at -r
-  // Every option that changes the training (config.json keys), paths made absolute. Left out: those
-  // resolved above (source, resolution, n_views, train_views, test_views), --iterations (checked on its
-  // own) and the output-only ones (model_dir, save/checkpoint/test iterations, log_every, quiet).
+  // Every option that changes the training (config.json keys; OptionRole::Training in options.hpp), paths
+  // made absolute. Left out: those resolved above (source, resolution, n_views, train_views, test_views),
+  // --iterations (checked on its own) and the output-only ones (model_path, save/checkpoint/test
+  // iterations, log_every, quiet). check_resume compares them under their current names.
   nlohmann::json options = nlohmann::json::object();
 };
 
 RunIdentity run_identity(const Scene& scene, const Split& split, const TrainConfig& config);
+
+// What a training method keeps between iterations (train/methods/method.hpp), by name: groups of float
+// arrays and of byte arrays. The checkpoint stores it without knowing what it means; the method checks
+// it against the run when resuming.
+struct MethodState {
+  std::map<std::string, std::vector<std::vector<float>>> floats;
+  std::map<std::string, std::vector<std::vector<std::uint8_t>>> bytes;
+  bool operator==(const MethodState&) const = default;
+};
 
 // The state of a run after iteration `iteration`: everything the next iteration reads.
 struct TrainingState {
@@ -53,8 +66,7 @@ struct TrainingState {
   Rng::State rng_cameras{}, rng_dropout{}, rng_densify{};
   Gaussians model, exp_avg, exp_avg_sq;  // the model and its two Adam moments
   std::vector<float> grad_sums, grad_counts;  // densification statistics, one per Gaussian
-  std::vector<float> density_cache;          // D²GS density scores (out of step with the model in the release mode)
-  std::vector<std::vector<std::uint8_t>> dafe_masks;  // D²GS far-region mask per training view (empty: none yet)
+  MethodState method;                         // the training method's own state (D²GS: density cache, DAFE masks)
 };
 
 struct Checkpoint {
@@ -76,7 +88,8 @@ std::vector<std::pair<int, std::filesystem::path>> checkpoints_in(const std::fil
 // Throws d2gs::Error "<source>: cannot resume: <first difference>" unless `checkpoint` continues the run
 // `run` trained to `iterations`: equal identities, `iterations` beyond the checkpoint's iteration (or equal
 // to it when the checkpoint is the last iteration of a run of that length), and a state that fits the
-// run (camera queue, DAFE masks). Returns a warning for a resume that is allowed but not an exact
+// run (camera queue, SH degree; the method's state is the method's to check: TrainingMethod::check_state).
+// Returns a warning for a resume that is allowed but not an exact
 // continuation (another --iterations than the checkpointed run's), else an empty string.
 std::string check_resume(const std::filesystem::path& source, const Checkpoint& checkpoint, const RunIdentity& run,
                          int iterations);

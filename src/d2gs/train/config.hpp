@@ -1,7 +1,8 @@
 #pragma once
 // Every training option, with the defaults of method.md §2 (shared by 3DGS, DropGaussian and D²GS).
-// The same structure is filled from command-line flags and from a JSON file (`--config`), and the
-// effective configuration is saved as MODEL_DIR/config.json.
+// Each option is declared once in options.cpp (name = config.json key = flag, help, range), from which
+// the command line, the JSON reading and writing and the per-option checks are made; the effective
+// configuration is saved as MODEL_DIR/config.json.
 #include <cstdint>
 #include <filesystem>
 #include <string>
@@ -17,14 +18,10 @@
 
 namespace d2gs {
 
-enum class Method { Gs3d, DropGaussian, D2gs };
-const char* to_string(Method m);
-Method method_from_string(const std::string& s);  // "3dgs" | "dropgaussian" | "d2gs"
-
 struct TrainConfig {
   // data
   std::string source;                 // -s
-  std::string model_dir;              // -m
+  std::string model_dir;              // -m (config.json key model_path)
   int resolution = 1;                 // -r
   int n_views = 0;                    // 0 = every non-test view
   std::vector<int> train_views, test_views;
@@ -34,7 +31,7 @@ struct TrainConfig {
   ImageSource image_source = ImageSource::Folder;
 
   // method
-  Method method = Method::Gs3d;
+  std::string method = "3dgs";  // a name of train/methods/registry.cpp: 3dgs, dropgaussian, d2gs
   int iterations = 10000;
   std::uint64_t seed = 0;
 
@@ -70,16 +67,9 @@ struct TrainConfig {
   // D²GS preset"); --preset paper switches to the paper's formulas and constants.
   std::string preset;        // "paper", "release" or empty (= the defaults, i.e. the release's values)
   std::string scene_preset;  // e.g. "llff/fern", or empty
-  DdDropOptions dd_drop = {.weight_depth = 0.3, .weight_density = 0.7, .depth_mode = DepthMode::ReleaseDot};
-  int density_refresh_every = 500;
-  bool release_density_cache = true;  // the release's quirk (see method.md §4)
-  bool dafe = true;
-  std::string dafe_prior_dir;          // folder of per-view depth/disparity maps; "stereo": the init's depths
-  PriorKind dafe_prior_kind = PriorKind::Disparity;
-  DafeMaskRule dafe_mask_rule = DafeMaskRule::Percentile;
-  double dafe_tau = 5.0;               // percent (percentile rule) or fraction (threshold rule)
-  DafeLossForm dafe_loss_form = DafeLossForm::Release;
-  float dafe_lambda = 1.0f;
+  DdDropOptions dd_drop = {.weight_depth = 0.3, .weight_density = 0.7, .depth_mode = DepthMode::ReleaseDot,
+                           .release_density_cache = true};
+  DafeOptions dafe;
 
   // outputs
   std::vector<int> save_iterations;        // empty = the last iteration only
@@ -88,20 +78,29 @@ struct TrainConfig {
   int log_every = 10;
   bool quiet = false;
 
-  // Throws d2gs::Error for impossible values, naming the option: ranges, an --init that is neither a
-  // keyword nor an existing file, a model folder that cannot be created (a path under a file).
+  // Throws d2gs::Error for impossible values, naming the option: the method's name, each option's range
+  // (options.cpp), then what ties options together (the DD-Drop rates, the iterations of saves and
+  // tests), an --init that is neither a keyword nor an existing file, a model folder that cannot be
+  // created (a path under a file).
   void validate() const;
 };
+
+// The keys a run's config.json records beside the options (the split, the scene extent, ...): a
+// --config file or an experiment may hold them, and they are not read back as options.
+inline constexpr const char* kRecordedKeys[] = {"init_is_oracle", "scene_extent", "split", "images_folder"};
 
 // How the run's scene is loaded (resolution, background, image source).
 SceneLoadOptions scene_load_options(const TrainConfig& c);
 
+// Every option under its name (options.hpp).
 void to_json(nlohmann::json& j, const TrainConfig& c);
-// Reads the keys present in `j` into `c` (others keep their values). An unknown key, a value of the wrong
-// type, a fraction for an integer option and a number outside its option's type (never wrapped or
-// truncated) are errors "key 'NAME': problem"; callers reading a file prefix its name. The options' own
-// ranges are validate()'s, as for the command line.
-void update_from_json(TrainConfig& c, const nlohmann::json& j);
+// Reads the keys present in `j` into `c` (others keep their values), an option's former name as its
+// name. An unknown key, a value of the wrong type, a fraction for an integer option and a number
+// outside its option's type (never wrapped or truncated) are errors "key 'NAME': problem", and leave `c`
+// as it was; callers reading a file prefix its name. The options' own ranges are validate()'s, as for
+// the command line. With `recorded` = Ignore, the keys of kRecordedKeys are skipped (a saved config.json).
+enum class RecordedKeys { Refuse, Ignore };
+void update_from_json(TrainConfig& c, const nlohmann::json& j, RecordedKeys recorded = RecordedKeys::Refuse);
 
 // The scene folder recorded in a run's config.json. d2gs train records it absolute; a relative one (an
 // older run, a hand-written file) is taken relative to the run folder `model_dir` when that exists there,

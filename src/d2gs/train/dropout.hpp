@@ -37,6 +37,12 @@ struct DdDropOptions {
   double lambda_near = 1.0, lambda_middle = 0.7, lambda_far = 0.3;
   DepthMode depth_mode = DepthMode::Euclidean;
   bool compensate = false;  // kept Gaussians' opacity × 1/(1 − p_i), so that its expectation is unchanged
+  // The density scores are computed at iteration 1 and every `density_refresh_every` iterations and
+  // cached in between. Through densification the paper carries them along (children inherit their
+  // parent's score); the release's cache (`release_density_cache`) keeps its old length instead: every
+  // score 0.5 when the model grew, the first N scores when it shrank (method.md §4).
+  int density_refresh_every = 500;
+  bool release_density_cache = false;
 };
 
 // r(t) of DD-Drop.

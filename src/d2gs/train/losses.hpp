@@ -2,6 +2,7 @@
 // Photometric losses with hand-written gradients (w.r.t. the rendered image), and DAFE (method.md §5).
 // Images are interleaved H×W×C floats; masks are H×W bytes (1 = far region).
 #include <cstdint>
+#include <string>
 #include <vector>
 
 namespace d2gs {
@@ -12,6 +13,19 @@ double l1_loss(const float* a, const float* b, std::size_t count, float* grad = 
 enum class PriorKind { Depth, Disparity };  // disparity: large = near (Depth Anything V2 output)
 enum class DafeMaskRule { Percentile, Threshold };
 enum class DafeLossForm { Paper, Release };
+
+// DAFE's options (method.md §5): the far-region mask comes from a prior map per training view (`prior`:
+// a folder of NAME.npy maps, or "stereo": the depth maps of the training views' geometry) or, with no
+// prior, from the model's own depth at iteration 1000; the loss is the L1 on that region, weighted by λ.
+struct DafeOptions {
+  bool enabled = true;
+  std::string prior;  // folder of per-view maps, "stereo", or empty (the self-prior)
+  PriorKind prior_kind = PriorKind::Disparity;
+  DafeMaskRule mask_rule = DafeMaskRule::Percentile;
+  double tau = 5.0;  // percent (percentile rule) or fraction (threshold rule)
+  DafeLossForm loss_form = DafeLossForm::Release;
+  float lambda = 1.0f;
+};
 
 // Far-region mask from a prior map. Percentile: the farthest `tau_percent` % of the valid pixels, i.e.
 // depth ≥ its (100 − τ)-th percentile, or disparity ≤ its τ-th percentile (NumPy's linear

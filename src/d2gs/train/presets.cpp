@@ -1,5 +1,7 @@
 #include "d2gs/train/presets.hpp"
 
+#include <nlohmann/json.hpp>
+
 #include "d2gs/core/error.hpp"
 
 namespace d2gs {
@@ -22,26 +24,26 @@ const std::vector<D2gsScenePreset>& d2gs_scene_presets() {
 void apply_d2gs_preset(TrainConfig& c, const std::string& preset) {
   if (preset == "paper") {
     c.dd_drop.depth_mode = DepthMode::Euclidean;
-    c.release_density_cache = false;
+    c.dd_drop.release_density_cache = false;
     c.dd_drop.weight_depth = 0.5;
     c.dd_drop.weight_density = 0.5;
     c.dd_drop.rate_min = 0.05;
     c.dd_drop.rate_max = 0.3;
-    c.dafe_mask_rule = DafeMaskRule::Percentile;
-    c.dafe_tau = 5.0;
-    c.dafe_loss_form = DafeLossForm::Paper;
-    c.dafe_lambda = 1.0f;
+    c.dafe.mask_rule = DafeMaskRule::Percentile;
+    c.dafe.tau = 5.0;
+    c.dafe.loss_form = DafeLossForm::Paper;
+    c.dafe.lambda = 1.0f;
   } else if (preset == "release") {
     // The release's values are TrainConfig's defaults (config.hpp): restore them.
     const TrainConfig d;
     c.dd_drop.depth_mode = d.dd_drop.depth_mode;
-    c.release_density_cache = d.release_density_cache;
+    c.dd_drop.release_density_cache = d.dd_drop.release_density_cache;
     c.dd_drop.weight_depth = d.dd_drop.weight_depth;
     c.dd_drop.weight_density = d.dd_drop.weight_density;
     c.dd_drop.rate_min = d.dd_drop.rate_min;
     c.dd_drop.rate_max = d.dd_drop.rate_max;
-    c.dafe_mask_rule = d.dafe_mask_rule;
-    c.dafe_loss_form = d.dafe_loss_form;
+    c.dafe.mask_rule = d.dafe.mask_rule;
+    c.dafe.loss_form = d.dafe.loss_form;
   } else {
     fail("unknown D2GS preset '{}' (expected paper or release)", preset);
   }
@@ -67,9 +69,20 @@ void apply_scene_preset(TrainConfig& c, const std::string& name) {
   c.dd_drop.weight_density = found->weight_density;
   c.dd_drop.rate_min = found->rate_min;
   c.dd_drop.rate_max = found->rate_max;
-  c.dafe_mask_rule = DafeMaskRule::Percentile;
-  c.dafe_tau = found->mask_percent;
-  c.dafe_lambda = static_cast<float>(found->dafe_lambda);
+  c.dafe.mask_rule = DafeMaskRule::Percentile;
+  c.dafe.tau = found->mask_percent;
+  c.dafe.lambda = static_cast<float>(found->dafe_lambda);
+}
+
+void apply_given_options(TrainConfig& c, const nlohmann::json& given) {
+  TrainConfig out = c;
+  const auto named = [&given](const char* key) {
+    return given.contains(key) && given[key].is_string() ? given[key].get<std::string>() : std::string();
+  };
+  if (const std::string preset = named("preset"); !preset.empty()) apply_d2gs_preset(out, preset);
+  if (const std::string scene = named("scene_preset"); !scene.empty()) apply_scene_preset(out, scene);
+  update_from_json(out, given);
+  c = std::move(out);
 }
 
 }  // namespace d2gs

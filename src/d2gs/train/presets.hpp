@@ -4,6 +4,8 @@
 #include <string>
 #include <vector>
 
+#include <nlohmann/json_fwd.hpp>
+
 #include "d2gs/train/config.hpp"
 
 namespace d2gs {
@@ -28,5 +30,10 @@ void apply_d2gs_preset(TrainConfig& config, const std::string& preset);
 // "mipnerf360/room" (a bare "room" is ambiguous: LLFF and Mip-NeRF 360 both have one). Throws for an
 // unknown or ambiguous name, listing the known ones.
 void apply_scene_preset(TrainConfig& config, const std::string& name);
+
+// The command line's options (config.json keys) over `config`, which holds the defaults and any
+// --config file: first the presets they name (`preset`, then `scene_preset`), then every option given,
+// so that an explicit flag wins over a preset, and the names of the presets are recorded.
+void apply_given_options(TrainConfig& config, const nlohmann::json& given);
 
 }  // namespace d2gs

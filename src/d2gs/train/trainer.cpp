@@ -16,17 +16,16 @@
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/file_lock.hpp"
-#include "d2gs/core/npy.hpp"
 #include "d2gs/core/random.hpp"
 #include "d2gs/model/ply.hpp"
 #include "d2gs/render/activations.hpp"
 #include "d2gs/render/rasterizer.hpp"
 #include "d2gs/train/checkpoint.hpp"
 #include "d2gs/train/densify.hpp"
-#include "d2gs/train/dropout.hpp"
-#include "d2gs/train/initialize.hpp"
 #include "d2gs/geometry/training_geometry.hpp"
+#include "d2gs/train/initialize.hpp"
 #include "d2gs/train/losses.hpp"
+#include "d2gs/train/methods/method.hpp"
 #include "d2gs/train/ssim.hpp"
 
 namespace d2gs {
@@ -74,12 +73,11 @@ struct Trainer::State {
   int active_sh = 0;
   Rng rng_cameras, rng_dropout, rng_densify;
   std::vector<int> camera_stack;              // positions in split.train still to visit this epoch
-  std::vector<float> density_cache;           // D²GS: density scores
-  std::vector<std::vector<std::uint8_t>> dafe_masks;  // D²GS: far-region mask per training view
+  std::unique_ptr<TrainingMethod> method;     // 3DGS, DropGaussian, D²GS, ... (train/methods/)
   double elapsed_before = 0.0;                // seconds spent before a resume
 
   // per-iteration buffers (reused)
-  std::vector<float> multiplier, pred, grad_rgb, dd_probabilities;
+  std::vector<float> pred, grad_rgb;
   Clock::time_point started = Clock::now();
   std::ofstream log;
   // Set by run(): step() then saves the model and scores the test views at the configured iterations, after the
@@ -127,7 +125,7 @@ void check_resumed_run_in_folder(const fs::path& dir, const TrainConfig& cfg, co
   nlohmann::json j;
   try {
     j = nlohmann::json::parse(read_file(file));
-    if (j.at("method") == to_string(cfg.method) && j.at("seed") == cfg.seed && j.at("resolution") == cfg.resolution &&
+    if (j.at("method") == cfg.method && j.at("seed") == cfg.seed && j.at("resolution") == cfg.resolution &&
         j.at("split").at("train") == split.train && j.at("split").at("test") == split.test)
       return;
   } catch (const nlohmann::json::exception&) {
@@ -173,61 +171,7 @@ void restore(Trainer::State& s, TrainingState&& t) {
   s.adam.exp_avg = std::move(t.exp_avg);
   s.adam.exp_avg_sq = std::move(t.exp_avg_sq);
   s.stats.restore(std::move(t.grad_sums), std::move(t.grad_counts));
-  s.density_cache = std::move(t.density_cache);
-  if (t.dafe_masks.empty())
-    s.dafe_masks.assign(s.split.train.size(), {});
-  else
-    s.dafe_masks = std::move(t.dafe_masks);
-}
-
-void load_dafe_priors(Trainer::State& s) {
-  const auto& cfg = s.cfg;
-  s.dafe_masks.assign(s.split.train.size(), {});
-  if (cfg.method != Method::D2gs || !cfg.dafe || cfg.dafe_prior_dir.empty()) return;
-  const fs::path dir = cfg.dafe_prior_dir;
-  for (std::size_t k = 0; k < s.split.train.size(); ++k) {
-    const Camera& cam = s.scene.cameras[static_cast<std::size_t>(s.split.train[k])];
-    const std::string stem = fs::path(cam.image_name).stem().string();
-    const fs::path npy = dir / (stem + ".npy");
-    if (!fs::exists(npy)) fail_file(npy, "DAFE prior missing for training view {}", cam.image_name);
-    const NpyArray a = read_npy(npy);
-    if (a.shape.size() != 2) fail_file(npy, "expected an H×W map, got {} dimensions", a.shape.size());
-    const int h = static_cast<int>(a.shape[0]), w = static_cast<int>(a.shape[1]);
-    Image prior(w, h, 1);
-    for (std::size_t i = 0; i < a.values.size(); ++i) prior.pixels[i] = static_cast<float>(a.values[i]);
-    // Depth priors mark pixels without a depth by 0 (d2gs init's stereo depth maps): never far, and never
-    // averaged into the valid depths when the map is resized (PatchMatch's maps are at the scene folder's
-    // highest resolution).
-    const bool depth = cfg.dafe_prior_kind == PriorKind::Depth;
-    if (w != cam.width || h != cam.height) prior = depth ? resize_area_nonzero(prior, cam.width, cam.height)
-                                                         : resize_area(prior, cam.width, cam.height);
-    std::vector<std::uint8_t> valid(prior.pixels.size(), 1);
-    if (depth)
-      for (std::size_t i = 0; i < valid.size(); ++i) valid[i] = prior.pixels[i] > 0.0f;
-    s.dafe_masks[k] = dafe_mask(prior.pixels, cfg.dafe_prior_kind, cfg.dafe_mask_rule, cfg.dafe_tau, &valid);
-  }
-}
-
-// D²GS without a prior folder: the model's own normalised depth, rendered once for every training view
-// at the first iteration of DAFE (iteration `self_prior_at`), is the depth prior.
-constexpr int kSelfPriorIteration = 1000;
-
-void make_self_priors(Trainer::State& s) {
-  render::RenderOptions ro;
-  ro.background = s.scene.background;
-  ro.sh_degree = s.active_sh;
-  for (std::size_t k = 0; k < s.split.train.size(); ++k) {
-    const auto& out = s.rasterizer->forward(s.model, nullptr, s.train_cameras[k], ro);
-    std::vector<float> depth(out.depth.size());
-    std::vector<std::uint8_t> valid(out.depth.size());
-    for (std::size_t i = 0; i < depth.size(); ++i) {
-      valid[i] = out.alpha[i] > 0.5f;
-      depth[i] = valid[i] ? out.depth[i] / out.alpha[i] : 0.0f;
-    }
-    s.dafe_masks[k] = dafe_mask(depth, PriorKind::Depth, s.cfg.dafe_mask_rule == DafeMaskRule::Threshold
-                                                             ? DafeMaskRule::Threshold : DafeMaskRule::Percentile,
-                                s.cfg.dafe_tau, &valid);
-  }
+  s.method->restore(std::move(t.method));
 }
 
 void write_cameras_json(const Trainer::State& s) {
@@ -254,6 +198,7 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
   auto& s = *s_;
   config.validate();
   s.cfg = std::move(config);
+  s.method = make_training_method(s.cfg);
   const bool resuming = !resume_from.empty();
   std::error_code ec;
   if (fs::exists(s.cfg.model_dir, ec) && !fs::is_directory(s.cfg.model_dir, ec))
@@ -265,17 +210,15 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
   so.test_views = s.cfg.test_views;
   s.split = make_split(s.scene, so);
   if (s.split.train.empty()) fail("{}: no training views", s.cfg.source);
+  // The training-view geometry (init dense/sparse, D²GS's DAFE prior "stereo"): SCENE/{N}_views written
+  // by `d2gs init` when it matches, else MODEL/init (built there once, reused on --resume).
+  const std::vector<fs::path> geometry_dirs = {training_geometry_dir(s.scene, s.split.train.size()), s.out() / "init"};
+  const MethodRun method_run{s.scene, s.split, s.out(), geometry_dirs};
   // What the run trains on, checked against a checkpoint before anything is read from the images or
-  // written. "stereo" becomes a folder below, and config.json records that folder and kind depth: both
-  // spellings are one run, so that `--config MODEL/config.json --resume ...` continues it.
+  // written. The method makes options that name one run alike (D²GS: "stereo" and its folder).
   {
     TrainConfig as_trained = s.cfg;
-    if (!as_trained.dafe_prior_dir.empty() && as_trained.dafe_prior_dir != "stereo") {
-      const auto is = [&](const fs::path& folder) { return fs::equivalent(as_trained.dafe_prior_dir, folder, ec); };
-      if (is(training_geometry_dir(s.scene, s.split.train.size()) / "depth") || is(s.out() / "init" / "depth"))
-        as_trained.dafe_prior_dir = "stereo";
-    }
-    if (as_trained.dafe_prior_dir == "stereo") as_trained.dafe_prior_kind = PriorKind::Depth;
+    s.method->describe(as_trained, method_run);
     s.identity = run_identity(s.scene, s.split, as_trained);
   }
   std::optional<Checkpoint> checkpoint;
@@ -283,6 +226,11 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
     checkpoint = read_checkpoint(resume_from);
     if (const std::string warning = check_resume(resume_from, *checkpoint, s.identity, s.cfg.iterations); !warning.empty())
       spdlog::warn("{}", warning);
+    try {
+      s.method->check_state(checkpoint->state.method, s.identity);
+    } catch (const Error& e) {
+      fail_file(resume_from, "cannot resume: {}", e.what());
+    }
   }
   s.folder_lock = lock_model_dir(s.out(), resuming);
   if (resuming) check_resumed_run_in_folder(s.out(), s.cfg, s.split);
@@ -297,15 +245,11 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
   s.rng_densify = Rng::stream(s.cfg.seed, "densify");
 
   PointCloud init;
-  // The training-view geometry (init dense/sparse, DAFE prior "stereo"): SCENE/{N}_views written by
-  // `d2gs init` when it matches, else MODEL/init (built there once, reused on --resume).
-  const auto training_geometry = [&s]() {
+  const std::function<CachedTrainingGeometry()> training_geometry = [&s, &geometry_dirs]() {
     TrainingGeometryOptions go;
     go.seed = s.cfg.seed;
     go.dense_method = parse_dense_method(s.cfg.init_dense_method);
-    return obtain_training_geometry(s.scene, s.split.train, go,
-                                    {training_geometry_dir(s.scene, s.split.train.size()), s.out() / "init"},
-                                    s.out() / "init");
+    return obtain_training_geometry(s.scene, s.split.train, go, geometry_dirs, s.out() / "init");
   };
   if (s.cfg.init == "dense" || s.cfg.init == "sparse") {
     const auto g = training_geometry();
@@ -336,11 +280,7 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
   s.model = gaussians_from_point_cloud(init, s.cfg.sh_degree);
   s.adam = Adam::make_state(s.model);
   s.stats.reset(s.model.size());
-  if (s.cfg.method == Method::D2gs && s.cfg.dafe && s.cfg.dafe_prior_dir == "stereo") {
-    s.cfg.dafe_prior_dir = training_geometry().depth_dir.string();
-    s.cfg.dafe_prior_kind = PriorKind::Depth;
-  }
-  load_dafe_priors(s);
+  s.method->start(s.cfg, method_run, training_geometry);
 
   fs::create_directories(s.out());
   if (checkpoint) {
@@ -392,44 +332,20 @@ IterationRecord Trainer::step() {
   const int view = s.camera_stack[pick];
   s.camera_stack.erase(s.camera_stack.begin() + static_cast<std::ptrdiff_t>(pick));
   const Image& gt = s.train_images[static_cast<std::size_t>(view)];
-  const std::size_t n = s.model.size();
 
-  // Dropout mask.
-  const float* multiplier = nullptr;
-  if (cfg.method == Method::DropGaussian) {
-    dropgaussian_mask(n, dropgaussian_rate(t, cfg.iterations, cfg.dropgaussian_max_rate), s.rng_dropout, s.multiplier);
-    multiplier = s.multiplier.data();
-  } else if (cfg.method == Method::D2gs) {
-    if (t == 1 || t % cfg.density_refresh_every == 0 || s.density_cache.empty()) s.density_cache = density_scores(s.model);
-    // The cache has the model's size except with the release's cache behaviour, where it is out of step
-    // after densification: every score 0.5 when the model grew, the first N cached scores when it shrank.
-    std::vector<float> out_of_step;
-    if (s.density_cache.size() != n) {
-      out_of_step = s.density_cache.size() < n ? std::vector<float>(n, 0.5f)
-                                               : std::vector<float>(s.density_cache.begin(), s.density_cache.begin() + static_cast<std::ptrdiff_t>(n));
-    }
-    const std::vector<float>& density = s.density_cache.size() == n ? s.density_cache : out_of_step;
-    const Camera& cam = s.scene.cameras[static_cast<std::size_t>(s.split.train[static_cast<std::size_t>(view)])];
-    s.dd_probabilities = dd_drop_probabilities(gaussian_depths(s.model, cam, cfg.dd_drop.depth_mode), density, cfg.dd_drop, t);
-    bernoulli_mask(s.dd_probabilities, s.rng_dropout, s.multiplier, cfg.dd_drop.compensate);
-    multiplier = s.multiplier.data();
-  }
-  if (multiplier) {
-    std::size_t dropped = 0;
-    for (std::size_t i = 0; i < n; ++i) dropped += s.multiplier[i] == 0.0f;
-    rec.drop_fraction = n ? static_cast<double>(dropped) / static_cast<double>(n) : 0.0;
-  }
-
-  // D²GS without a prior folder: the self prior is rendered before this iteration's forward pass.
-  if (cfg.method == Method::D2gs && cfg.dafe && cfg.dafe_prior_dir.empty() && t == kSelfPriorIteration)
-    make_self_priors(s);
-
-  // Render and loss on the clamped image.
+  // The method's hooks before the render: its preparations, then this iteration's opacity multiplier.
   render::RenderOptions ro;
   ro.background = s.scene.background;
   ro.sh_degree = s.active_sh;
   ro.alpha_clamp_pass_through = cfg.alpha_clamp_pass_through;
-  const auto& out = s.rasterizer->forward(s.model, multiplier, s.train_cameras[static_cast<std::size_t>(view)], ro);
+  const MethodStep method_step{t, view, s.scene.cameras[static_cast<std::size_t>(s.split.train[static_cast<std::size_t>(view)])],
+                               s.model, s.rng_dropout, *s.rasterizer, s.train_cameras, ro};
+  s.method->prepare(method_step);
+  const OpacityMultiplier multiplier = s.method->opacity_multiplier(method_step);
+  rec.drop_fraction = multiplier.drop_fraction;
+
+  // Render and loss on the clamped image.
+  const auto& out = s.rasterizer->forward(s.model, multiplier.values, s.train_cameras[static_cast<std::size_t>(view)], ro);
   const std::size_t values = out.rgb.size();
   s.pred.resize(values);
   s.grad_rgb.assign(values, 0.0f);
@@ -438,14 +354,8 @@ IterationRecord Trainer::step() {
   rec.ssim = s.ssim.evaluate(s.pred.data(), gt.pixels.data(), out.width, out.height, 3, s.grad_rgb.data(),
                              -cfg.lambda_dssim);
   rec.loss = rec.l1 + cfg.lambda_dssim * (1.0 - rec.ssim);
-  if (cfg.method == Method::D2gs && cfg.dafe) {
-    const auto& mask = s.dafe_masks[static_cast<std::size_t>(view)];
-    if (!mask.empty()) {
-      rec.dafe = dafe_loss(s.pred.data(), gt.pixels.data(), out.width, out.height, 3, mask, cfg.dafe_loss_form,
-                           s.grad_rgb.data(), cfg.dafe_lambda);
-      rec.loss += cfg.dafe_lambda * rec.dafe;
-    }
-  }
+  rec.terms = s.method->loss_terms(MethodLoss{method_step, s.pred.data(), gt, out.width, out.height, 3, s.grad_rgb.data()});
+  for (const LossTerm& term : rec.terms) rec.loss += term.weight * term.value;
   for (std::size_t i = 0; i < values; ++i)
     if (out.rgb[i] < 0.0f || out.rgb[i] > 1.0f) s.grad_rgb[i] = 0.0f;  // clamp: no gradient outside [0, 1]
   if (!std::isfinite(rec.loss)) fail("iteration {}: the loss is not finite ({}); stopping", t, rec.loss);
@@ -474,11 +384,7 @@ IterationRecord Trainer::step() {
     s.stats.add(grads.grad_mean2d_ndc, out.radii);
     if (t > cfg.densify_from && t % cfg.densify_every == 0) {
       const auto report = densify_and_prune(s.model, s.adam, s.stats, s.extent, cfg.densify, s.rng_densify);
-      if (cfg.method == Method::D2gs && !cfg.release_density_cache && !s.density_cache.empty()) {
-        std::vector<float> carried(report.source.size());
-        for (std::size_t i = 0; i < carried.size(); ++i) carried[i] = s.density_cache[report.source[i]];
-        s.density_cache = std::move(carried);
-      }
+      s.method->after_densify(report);
       skip_step = true;  // the new tensors carry no gradient this iteration
       s.log << nlohmann::json{{"event", "densify"}, {"iteration", t}, {"cloned", report.cloned}, {"split", report.split},
                               {"pruned", report.pruned}, {"gaussians", report.after}}.dump() << '\n';
@@ -498,10 +404,12 @@ IterationRecord Trainer::step() {
   rec.gaussians = s.model.size();
   rec.elapsed_s = s.elapsed();
   if (t % cfg.log_every == 0 || t == cfg.iterations) {
-    s.log << nlohmann::json{{"iteration", t}, {"loss", rec.loss}, {"l1", rec.l1}, {"ssim", rec.ssim},
-                            {"dafe", rec.dafe}, {"drop_fraction", rec.drop_fraction}, {"gaussians", rec.gaussians},
-                            {"elapsed_s", rec.elapsed_s}}.dump()
-          << '\n';
+    nlohmann::json line = {{"iteration", t}, {"loss", rec.loss}, {"l1", rec.l1}, {"ssim", rec.ssim}};
+    for (const LossTerm& term : rec.terms) line[term.name] = term.value;  // the method's terms (D²GS: dafe)
+    line["drop_fraction"] = rec.drop_fraction;
+    line["gaussians"] = rec.gaussians;
+    line["elapsed_s"] = rec.elapsed_s;
+    s.log << line.dump() << '\n';
     s.log.flush();
   }
   return rec;
@@ -524,8 +432,7 @@ void Trainer::save_checkpoint(const fs::path& path) const {
   t.exp_avg_sq = s.adam.exp_avg_sq;
   t.grad_sums = s.stats.sums();
   t.grad_counts = s.stats.counts();
-  t.density_cache = s.density_cache;
-  t.dafe_masks = s.dafe_masks;
+  t.method = s.method->state();
   write_checkpoint(path, s.identity, t);
 }
 
@@ -572,7 +479,7 @@ void Trainer::run() {
       const double rate = (t - start) / std::max(secs, 1e-9);
       const double eta = (cfg.iterations - t) / std::max(rate, 1e-9);
       const std::string line = fmt::format("[train {}] it {}/{}  {:.1f} it/s  loss {:.4f}  #G {}  elapsed {}  ETA {}",
-                                           to_string(cfg.method), t, cfg.iterations, rate, ema_loss, rec.gaussians,
+                                           cfg.method, t, cfg.iterations, rate, ema_loss, rec.gaussians,
                                            format_duration(s.elapsed()), format_duration(eta));
       if (tty && (std::chrono::duration<double>(now - last_print).count() > 0.25 || t == cfg.iterations)) {
         std::fprintf(stderr, "\r%s\033[K", line.c_str());
@@ -603,7 +510,7 @@ void Trainer::run() {
     const auto e = evaluate_test_views(s.out() / "test" / fmt::format("ours_{}", s.iteration));
     nlohmann::json j;
     to_json(j, e);
-    j["method"] = to_string(cfg.method);
+    j["method"] = cfg.method;
     j["iteration"] = s.iteration;
     j["gaussians"] = s.model.size();
     j["train_seconds"] = s.elapsed();

@@ -1,8 +1,10 @@
 #pragma once
 // The training loop of 3DGS / DropGaussian / D²GS (method.md §2, §4, §5) on the CPU rasterizer, with
 // the original's iteration order: learning-rate schedule, SH degree, camera from a random permutation,
-// dropout mask, render, loss (L1 + λ·D-SSIM [+ DAFE]) on the clamped image, backward, densification
-// statistics and edits, opacity reset, Adam step. Outputs in the layout of the original code.
+// the method's opacity multiplier (dropout), render, loss (L1 + λ·D-SSIM + the method's terms, e.g. DAFE)
+// on the clamped image, backward, densification statistics and edits, opacity reset, Adam step. What
+// differs between methods sits behind train/methods/method.hpp; the loop never asks which method it
+// runs. Outputs in the layout of the original code.
 #include <filesystem>
 #include <functional>
 #include <memory>
@@ -12,12 +14,14 @@
 #include "d2gs/scene/scene.hpp"
 #include "d2gs/scene/split.hpp"
 #include "d2gs/train/config.hpp"
+#include "d2gs/train/methods/method.hpp"
 
 namespace d2gs {
 
 struct IterationRecord {
   int iteration = 0;
-  double loss = 0, l1 = 0, ssim = 0, dafe = 0;
+  double loss = 0, l1 = 0, ssim = 0;  // loss = l1 + λ·(1 − ssim) + Σ weight·value of `terms`
+  std::vector<LossTerm> terms;        // the method's loss terms (D²GS: dafe)
   double drop_fraction = 0;  // share of Gaussians masked out this iteration
   std::size_t gaussians = 0;
   double elapsed_s = 0;
@@ -45,7 +49,7 @@ public:
   bool init_is_oracle() const;  // the initial cloud saw the test views (sfm-all-views)
 
   // Checkpoint: everything needed to continue bit-identically (model, moments, statistics, random
-  // streams, camera queue, D²GS caches). Written atomically.
+  // streams, camera queue, the method's state). Written atomically.
   void save_checkpoint(const std::filesystem::path& path) const;
 
   // Renders and scores the test views with the current model (no dropout).

@@ -1,0 +1,179 @@
+// D²GS (method.md §4, §5): DD-Drop, a dropout whose probabilities follow each Gaussian's depth and
+// density (train/dropout.hpp), and DAFE, an L1 term on the far region of each training view
+// (train/losses.hpp), its mask from a prior map per view or from the model's own depth at iteration 1000.
+// The method keeps the density scores (refreshed every density_refresh_every iterations, carried
+// through densification or left out of step as the release does) and the far-region masks, and saves
+// both in checkpoints.
+#include <algorithm>
+#include <filesystem>
+
+#include "d2gs/core/error.hpp"
+#include "d2gs/core/npy.hpp"
+#include "d2gs/train/dropout.hpp"
+#include "d2gs/train/losses.hpp"
+#include "d2gs/train/methods/method.hpp"
+
+namespace d2gs {
+namespace {
+namespace fs = std::filesystem;
+
+// Without a prior folder the model's own normalised depth, rendered for every training view at this
+// iteration (the first of DAFE), is the depth prior.
+constexpr int kSelfPriorIteration = 1000;
+
+// The names of the method's state in checkpoints.
+constexpr const char* kDensityCache = "density_cache";
+constexpr const char* kDafeMasks = "dafe_masks";
+
+class D2gs final : public TrainingMethod {
+public:
+  explicit D2gs(const TrainConfig& c) : dd_(c.dd_drop), dafe_(c.dafe) {}
+  const char* name() const override { return "d2gs"; }
+
+  // "stereo" and the folder it resolves to (which config.json records, with kind depth) are one run,
+  // so that `--config MODEL/config.json --resume ...` continues it.
+  void describe(TrainConfig& as_trained, const MethodRun& run) const override {
+    DafeOptions& d = as_trained.dafe;
+    if (!d.prior.empty() && d.prior != "stereo") {
+      std::error_code ec;
+      for (const fs::path& dir : run.geometry_dirs)
+        if (fs::equivalent(d.prior, dir / "depth", ec)) d.prior = "stereo";
+    }
+    if (d.prior == "stereo") d.prior_kind = PriorKind::Depth;
+  }
+
+  void check_state(const MethodState& state, const RunIdentity& run) const override {
+    for (const auto& [group, arrays] : state.floats)
+      if (group != kDensityCache || arrays.size() > 1) fail("it holds state '{}' ({} arrays), which --method d2gs does not keep", group, arrays.size());
+    for (const auto& [group, arrays] : state.bytes)
+      if (group != kDafeMasks) fail("it holds state '{}', which --method d2gs does not keep", group);
+    const auto masks = state.bytes.find(kDafeMasks);
+    if (masks == state.bytes.end()) return;
+    const std::size_t views = run.train_views.size();
+    if (!masks->second.empty() && masks->second.size() != views)
+      fail("it holds {} DAFE masks for {} training views", masks->second.size(), views);
+    for (std::size_t k = 0; k < masks->second.size(); ++k) {
+      const std::size_t pixels = static_cast<std::size_t>(run.train_sizes[k][0]) * static_cast<std::size_t>(run.train_sizes[k][1]);
+      if (!masks->second[k].empty() && masks->second[k].size() != pixels)
+        fail("its DAFE mask of training view {} has {} pixels, the view {}", run.train_views[k], masks->second[k].size(), pixels);
+    }
+  }
+
+  void start(TrainConfig& config, const MethodRun& run,
+             const std::function<CachedTrainingGeometry()>& training_geometry) override {
+    if (dafe_.enabled && dafe_.prior == "stereo") {
+      config.dafe.prior = training_geometry().depth_dir.string();
+      config.dafe.prior_kind = PriorKind::Depth;
+      dafe_.prior = config.dafe.prior;
+      dafe_.prior_kind = config.dafe.prior_kind;
+    }
+    masks_.assign(run.split.train.size(), {});
+    if (dafe_.enabled && !dafe_.prior.empty()) load_priors(run);
+  }
+
+  void prepare(const MethodStep& step) override {
+    if (dafe_.enabled && dafe_.prior.empty() && step.iteration == kSelfPriorIteration) make_self_priors(step);
+  }
+
+  OpacityMultiplier opacity_multiplier(const MethodStep& step) override {
+    const int t = step.iteration;
+    const std::size_t n = step.model.size();
+    if (t == 1 || t % dd_.density_refresh_every == 0 || density_.empty()) density_ = density_scores(step.model);
+    // The cache has the model's size except with the release's cache behaviour, where it is out of step
+    // after densification: every score 0.5 when the model grew, the first N cached scores when it shrank.
+    std::vector<float> out_of_step;
+    if (density_.size() != n) {
+      out_of_step = density_.size() < n ? std::vector<float>(n, 0.5f)
+                                        : std::vector<float>(density_.begin(), density_.begin() + static_cast<std::ptrdiff_t>(n));
+    }
+    const std::vector<float>& density = density_.size() == n ? density_ : out_of_step;
+    probabilities_ = dd_drop_probabilities(gaussian_depths(step.model, step.camera, dd_.depth_mode), density, dd_, t);
+    bernoulli_mask(probabilities_, step.rng, multiplier_, dd_.compensate);
+    return {multiplier_.data(), drop_fraction(multiplier_)};
+  }
+
+  std::vector<LossTerm> loss_terms(const MethodLoss& loss) override {
+    if (!dafe_.enabled) return {};
+    const auto& mask = masks_[static_cast<std::size_t>(loss.step.view)];
+    const double value = mask.empty() ? 0.0
+                                      : dafe_loss(loss.prediction, loss.target.pixels.data(), loss.width, loss.height,
+                                                  loss.channels, mask, dafe_.loss_form, loss.grad, dafe_.lambda);
+    return {{"dafe", value, dafe_.lambda}};
+  }
+
+  void after_densify(const DensifyReport& report) override {
+    if (dd_.release_density_cache || density_.empty()) return;
+    std::vector<float> carried(report.source.size());
+    for (std::size_t i = 0; i < carried.size(); ++i) carried[i] = density_[report.source[i]];
+    density_ = std::move(carried);
+  }
+
+  MethodState state() const override {
+    MethodState s;
+    s.floats[kDensityCache] = {density_};
+    s.bytes[kDafeMasks] = masks_;
+    return s;
+  }
+
+  void restore(MethodState&& s) override {
+    if (const auto it = s.floats.find(kDensityCache); it != s.floats.end() && !it->second.empty())
+      density_ = std::move(it->second.front());
+    if (const auto it = s.bytes.find(kDafeMasks); it != s.bytes.end() && !it->second.empty()) masks_ = std::move(it->second);
+  }
+
+private:
+  void load_priors(const MethodRun& run) {
+    const fs::path dir = dafe_.prior;
+    for (std::size_t k = 0; k < run.split.train.size(); ++k) {
+      const Camera& cam = run.scene.cameras[static_cast<std::size_t>(run.split.train[k])];
+      const std::string stem = fs::path(cam.image_name).stem().string();
+      const fs::path npy = dir / (stem + ".npy");
+      if (!fs::exists(npy)) fail_file(npy, "DAFE prior missing for training view {}", cam.image_name);
+      const NpyArray a = read_npy(npy);
+      if (a.shape.size() != 2) fail_file(npy, "expected an H×W map, got {} dimensions", a.shape.size());
+      const int h = static_cast<int>(a.shape[0]), w = static_cast<int>(a.shape[1]);
+      Image prior(w, h, 1);
+      for (std::size_t i = 0; i < a.values.size(); ++i) prior.pixels[i] = static_cast<float>(a.values[i]);
+      // Depth priors mark pixels without a depth by 0 (d2gs init's stereo depth maps): never far, and
+      // never averaged into the valid depths when the map is resized (PatchMatch's maps are at the scene
+      // folder's highest resolution).
+      const bool depth = dafe_.prior_kind == PriorKind::Depth;
+      if (w != cam.width || h != cam.height) prior = depth ? resize_area_nonzero(prior, cam.width, cam.height)
+                                                           : resize_area(prior, cam.width, cam.height);
+      std::vector<std::uint8_t> valid(prior.pixels.size(), 1);
+      if (depth)
+        for (std::size_t i = 0; i < valid.size(); ++i) valid[i] = prior.pixels[i] > 0.0f;
+      masks_[k] = dafe_mask(prior.pixels, dafe_.prior_kind, dafe_.mask_rule, dafe_.tau, &valid);
+    }
+  }
+
+  void make_self_priors(const MethodStep& step) {
+    render::RenderOptions ro;
+    ro.background = step.render_options.background;
+    ro.sh_degree = step.render_options.sh_degree;
+    for (std::size_t k = 0; k < step.train_cameras.size(); ++k) {
+      const auto& out = step.rasterizer.forward(step.model, nullptr, step.train_cameras[k], ro);
+      std::vector<float> depth(out.depth.size());
+      std::vector<std::uint8_t> valid(out.depth.size());
+      for (std::size_t i = 0; i < depth.size(); ++i) {
+        valid[i] = out.alpha[i] > 0.5f;
+        depth[i] = valid[i] ? out.depth[i] / out.alpha[i] : 0.0f;
+      }
+      masks_[k] = dafe_mask(depth, PriorKind::Depth,
+                            dafe_.mask_rule == DafeMaskRule::Threshold ? DafeMaskRule::Threshold : DafeMaskRule::Percentile,
+                            dafe_.tau, &valid);
+    }
+  }
+
+  DdDropOptions dd_;
+  DafeOptions dafe_;
+  std::vector<float> density_;                    // density scores (out of step with the model in the release mode)
+  std::vector<std::vector<std::uint8_t>> masks_;  // far-region mask per training view (empty: none yet)
+  std::vector<float> probabilities_, multiplier_;  // per-iteration buffers
+};
+
+}  // namespace
+
+std::unique_ptr<TrainingMethod> make_d2gs(const TrainConfig& config) { return std::make_unique<D2gs>(config); }
+
+}  // namespace d2gs

@@ -1,0 +1,59 @@
+// The training methods, by name: the one place a method is registered. A new method: its file in this
+// folder (a TrainingMethod and its make_ function), the make_ function declared and listed below, and
+// its source in src/d2gs/train/CMakeLists.txt.
+#include <fmt/format.h>
+
+#include "d2gs/core/error.hpp"
+#include "d2gs/train/methods/method.hpp"
+
+namespace d2gs {
+
+std::unique_ptr<TrainingMethod> make_gs3d(const TrainConfig& config);
+std::unique_ptr<TrainingMethod> make_dropgaussian(const TrainConfig& config);
+std::unique_ptr<TrainingMethod> make_d2gs(const TrainConfig& config);
+
+const std::vector<MethodInfo>& training_methods() {
+  static const std::vector<MethodInfo> methods = {
+      {"3dgs", "3D Gaussian Splatting (no dropout)", &make_gs3d},
+      {"dropgaussian", "DropGaussian: uniform dropout with opacity compensation", &make_dropgaussian},
+      {"d2gs", "D²GS: depth-and-density dropout (DD-Drop) and distance-aware fidelity enhancement (DAFE)", &make_d2gs},
+  };
+  return methods;
+}
+
+const MethodInfo* find_training_method(const std::string& name) {
+  for (const MethodInfo& m : training_methods())
+    if (name == m.name) return &m;
+  return nullptr;
+}
+
+std::string training_method_names() {
+  const auto& methods = training_methods();
+  std::string names;
+  for (std::size_t i = 0; i < methods.size(); ++i)
+    names += fmt::format("{}{}", i == 0 ? "" : i + 1 == methods.size() ? " or " : ", ", methods[i].name);
+  return names;
+}
+
+void check_method_name(const std::string& name) {
+  if (!find_training_method(name)) fail("unknown method '{}' (expected {})", name, training_method_names());
+}
+
+std::unique_ptr<TrainingMethod> make_training_method(const TrainConfig& config) {
+  check_method_name(config.method);
+  return find_training_method(config.method)->make(config);
+}
+
+void TrainingMethod::check_state(const MethodState& state, const RunIdentity&) const {
+  for (const auto& [group, arrays] : state.floats) fail("it holds state '{}', which --method {} does not keep", group, name());
+  for (const auto& [group, arrays] : state.bytes) fail("it holds state '{}', which --method {} does not keep", group, name());
+}
+
+double drop_fraction(const std::vector<float>& multiplier) {
+  if (multiplier.empty()) return 0.0;
+  std::size_t dropped = 0;
+  for (float m : multiplier) dropped += m == 0.0f;
+  return static_cast<double>(dropped) / static_cast<double>(multiplier.size());
+}
+
+}  // namespace d2gs

@@ -1,0 +1,196 @@
+// The training methods behind train/methods/method.hpp: the registry, each method's hooks against the
+// functions they stand for (train/dropout.hpp, train/losses.hpp), D²GS's density cache through
+// densification, and the checks of a checkpoint's method state.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstring>
+#include <functional>
+
+#include "d2gs/core/error.hpp"
+#include "d2gs/core/random.hpp"
+#include "d2gs/render/rasterizer.hpp"
+#include "d2gs/train/dropout.hpp"
+#include "d2gs/train/losses.hpp"
+#include "d2gs/train/methods/method.hpp"
+
+namespace d2gs {
+namespace {
+
+std::string error_of(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const Error& e) {
+    return e.what();
+  }
+  return "";
+}
+
+Gaussians random_model(std::size_t n) {
+  Rng rng(5);
+  Gaussians g;
+  g.resize(n, 0);
+  for (auto* a : {&g.means, &g.log_scales, &g.quats, &g.opacity_logits, &g.sh_dc, &g.sh_rest})
+    for (float& v : *a) v = static_cast<float>(rng.normal());
+  for (std::size_t i = 0; i < n; ++i) g.means[3 * i + 2] += 5.0f;  // in front of the camera
+  return g;
+}
+
+Camera camera() {
+  Camera c;
+  c.width = 8;
+  c.height = 6;
+  c.fx = c.fy = 8.0;
+  c.cx = 4.0;
+  c.cy = 3.0;
+  return c;
+}
+
+// What a hook needs around it.
+struct Fixture {
+  Camera cam = camera();
+  Gaussians model = random_model(40);
+  Rng rng = Rng::stream(3, "dropout");
+  std::unique_ptr<render::Rasterizer> rasterizer = render::make_cpu_rasterizer();
+  std::vector<render::RenderCamera> cameras = {render::make_render_camera(cam)};
+  MethodStep step(int t) { return MethodStep{t, 0, cam, model, rng, *rasterizer, cameras, {}}; }
+};
+
+TEST(Methods, Registry) {
+  ASSERT_EQ(training_methods().size(), 3u);
+  EXPECT_STREQ(training_methods()[0].name, "3dgs");
+  EXPECT_EQ(training_method_names(), "3dgs, dropgaussian or d2gs");
+  for (const MethodInfo& m : training_methods()) {
+    TrainConfig c;
+    c.method = m.name;
+    EXPECT_STREQ(make_training_method(c)->name(), m.name);
+    EXPECT_EQ(find_training_method(m.name), &m);
+  }
+  EXPECT_EQ(find_training_method("nerf"), nullptr);
+  TrainConfig c;
+  c.method = "nerf";
+  EXPECT_EQ(error_of([&] { (void)make_training_method(c); }), "unknown method 'nerf' (expected 3dgs, dropgaussian or d2gs)");
+}
+
+TEST(Methods, Gs3dHasNoHooks) {
+  Fixture f;
+  TrainConfig c;
+  auto m = make_training_method(c);
+  const Rng::State before = f.rng.state();
+  const OpacityMultiplier mult = m->opacity_multiplier(f.step(10));
+  EXPECT_EQ(mult.values, nullptr);
+  EXPECT_EQ(mult.drop_fraction, 0.0);
+  const Rng::State after = f.rng.state();
+  EXPECT_EQ(std::memcmp(after.words, before.words, sizeof before.words), 0);  // draws nothing
+  EXPECT_TRUE(m->state().floats.empty() && m->state().bytes.empty());
+  // A checkpoint holding state it does not keep is refused.
+  MethodState s;
+  s.floats["density_cache"] = {{0.5f}};
+  EXPECT_EQ(error_of([&] { m->check_state(s, {}); }), "it holds state 'density_cache', which --method 3dgs does not keep");
+}
+
+TEST(Methods, DropGaussianIsItsMaskAndRate) {
+  Fixture f;
+  TrainConfig c;
+  c.method = "dropgaussian";
+  c.iterations = 100;
+  auto m = make_training_method(c);
+  Rng same = f.rng;
+  const OpacityMultiplier mult = m->opacity_multiplier(f.step(50));
+  std::vector<float> expected;
+  dropgaussian_mask(f.model.size(), dropgaussian_rate(50, 100, c.dropgaussian_max_rate), same, expected);
+  ASSERT_NE(mult.values, nullptr);
+  EXPECT_EQ(std::vector<float>(mult.values, mult.values + f.model.size()), expected);
+  EXPECT_EQ(mult.drop_fraction, drop_fraction(expected));
+  EXPECT_GT(mult.drop_fraction, 0.0);
+}
+
+TEST(Methods, D2gsDensityCacheThroughDensification) {
+  Fixture f;
+  TrainConfig c;
+  c.method = "d2gs";
+  c.dafe.enabled = false;
+  c.dd_drop.release_density_cache = false;  // the paper: children inherit their parent's score
+  auto m = make_training_method(c);
+  m->start(c, MethodRun{Scene{}, Split{}, {}, {}}, [] { return CachedTrainingGeometry{}; });
+  Rng same = f.rng;
+  const OpacityMultiplier mult = m->opacity_multiplier(f.step(1));
+  const std::vector<float> density = density_scores(f.model);
+  std::vector<float> expected;
+  bernoulli_mask(dd_drop_probabilities(gaussian_depths(f.model, f.cam, c.dd_drop.depth_mode), density, c.dd_drop, 1),
+                 same, expected, c.dd_drop.compensate);
+  EXPECT_EQ(std::vector<float>(mult.values, mult.values + f.model.size()), expected);
+  EXPECT_EQ(m->state().floats.at("density_cache").front(), density);
+  // Densification: rows 3, 3, 0 of the old model.
+  DensifyReport report;
+  report.source = {3, 3, 0};
+  m->after_densify(report);
+  EXPECT_EQ(m->state().floats.at("density_cache").front(), (std::vector<float>{density[3], density[3], density[0]}));
+  // The release's cache keeps its length.
+  c.dd_drop.release_density_cache = true;
+  auto release = make_training_method(c);
+  (void)release->opacity_multiplier(f.step(1));
+  release->after_densify(report);
+  EXPECT_EQ(release->state().floats.at("density_cache").front(), density);
+  // And back from a checkpoint.
+  auto again = make_training_method(c);
+  again->restore(m->state());
+  EXPECT_EQ(again->state(), m->state());
+}
+
+TEST(Methods, D2gsDafeTermAndItsGradient) {
+  TrainConfig c;
+  c.method = "d2gs";
+  c.dafe.lambda = 0.5f;
+  auto m = make_training_method(c);
+  Scene scene;
+  scene.cameras = {camera()};
+  Split split;
+  split.train = {0};
+  m->start(c, MethodRun{scene, split, {}, {}}, [] { return CachedTrainingGeometry{}; });
+  MethodState s;
+  s.bytes["dafe_masks"] = {std::vector<std::uint8_t>(48, 0)};
+  for (int i = 0; i < 12; ++i) s.bytes["dafe_masks"][0][static_cast<std::size_t>(i)] = 1;
+  const auto mask = s.bytes["dafe_masks"][0];
+  m->restore(std::move(s));
+  Fixture f;
+  std::vector<float> pred(144), grad(144, 0.0f), expected_grad(144, 0.0f);
+  Image target(8, 6, 3);
+  for (std::size_t i = 0; i < pred.size(); ++i) {
+    pred[i] = static_cast<float>(i % 7) / 7.0f;
+    target.pixels[i] = static_cast<float>(i % 5) / 5.0f;
+  }
+  const MethodStep step = f.step(1);
+  const auto terms = m->loss_terms(MethodLoss{step, pred.data(), target, 8, 6, 3, grad.data()});
+  ASSERT_EQ(terms.size(), 1u);
+  EXPECT_EQ(terms[0].name, "dafe");
+  EXPECT_EQ(terms[0].weight, 0.5);
+  const double value = dafe_loss(pred.data(), target.pixels.data(), 8, 6, 3, mask, c.dafe.loss_form, expected_grad.data(), 0.5f);
+  EXPECT_EQ(terms[0].value, value);
+  EXPECT_GT(value, 0.0);
+  EXPECT_EQ(grad, expected_grad);
+}
+
+TEST(Methods, D2gsChecksItsCheckpointState) {
+  TrainConfig c;
+  c.method = "d2gs";
+  auto m = make_training_method(c);
+  RunIdentity run;
+  run.train_views = {1, 10, 19};
+  run.train_sizes = {{{8, 6}}, {{8, 6}}, {{8, 6}}};
+  MethodState s;
+  s.floats["density_cache"] = {std::vector<float>(15, 0.5f)};
+  s.bytes["dafe_masks"] = {std::vector<std::uint8_t>(48, 1), {}, std::vector<std::uint8_t>(48, 0)};
+  EXPECT_EQ(error_of([&] { m->check_state(s, run); }), "");
+  s.bytes["dafe_masks"].pop_back();
+  EXPECT_EQ(error_of([&] { m->check_state(s, run); }), "it holds 2 DAFE masks for 3 training views");
+  s.bytes["dafe_masks"] = {std::vector<std::uint8_t>(48, 1), std::vector<std::uint8_t>(47, 1), {}};
+  EXPECT_EQ(error_of([&] { m->check_state(s, run); }), "its DAFE mask of training view 10 has 47 pixels, the view 48");
+  s.bytes["dafe_masks"].clear();  // none yet: allowed
+  EXPECT_EQ(error_of([&] { m->check_state(s, run); }), "");
+  s.bytes["other"] = {};
+  EXPECT_EQ(error_of([&] { m->check_state(s, run); }), "it holds state 'other', which --method d2gs does not keep");
+}
+
+}  // namespace
+}  // namespace d2gs

@@ -1,0 +1,146 @@
+// The declaration of every training option (train/options.hpp): one name that is both the config.json
+// key and the flag, former names still taken, each option's range checked under the flag that exists,
+// and `d2gs train --help` listing every option once with its range and default.
+#include <gtest/gtest.h>
+
+#include <set>
+#include <string>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "d2gs/core/atomic_file.hpp"
+#include "d2gs/core/error.hpp"
+#include "d2gs/train/config.hpp"
+#include "d2gs/train/options.hpp"
+#include "test_paths.hpp"
+
+namespace d2gs {
+namespace {
+
+std::string error_of(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const Error& e) {
+    return e.what();
+  }
+  return "";
+}
+
+TEST(TrainOptions, OneNameForKeyAndFlagAndEveryKeyDeclared) {
+  std::set<std::string> names;
+  for (const TrainOption& o : train_options()) {
+    EXPECT_TRUE(names.insert(o.name).second) << o.name << " declared twice";
+    for (const auto& alias : o.aliases) EXPECT_TRUE(names.insert(alias).second) << alias << " names two options";
+    std::string dashed = o.name;
+    for (char& ch : dashed)
+      if (ch == '_') ch = '-';
+    EXPECT_EQ(o.flag(), "--" + dashed);
+    EXPECT_FALSE(o.help.empty()) << o.name;
+    EXPECT_FALSE(o.default_text().empty()) << o.name;
+    EXPECT_EQ(find_train_option(o.name), &o);
+    for (const auto& alias : o.aliases) EXPECT_EQ(find_train_option(alias), &o);
+  }
+  // config.json holds exactly the declared options.
+  nlohmann::json j;
+  to_json(j, TrainConfig{});
+  EXPECT_EQ(j.size(), train_options().size());
+  for (const TrainOption& o : train_options()) EXPECT_TRUE(j.contains(o.name)) << o.name;
+}
+
+// The defaults are within every declared range (validate() needs only the required paths).
+TEST(TrainOptions, DefaultsAreInRange) {
+  const TrainConfig d;
+  for (const TrainOption& o : train_options()) EXPECT_EQ(error_of([&] { o.check(d); }), "") << o.name;
+}
+
+// Former names: the config.json of a run trained before the names agreed, and an experiment's options.
+TEST(TrainOptions, FormerNamesAreTakenAndWrittenUnderTheNewOnes) {
+  TrainConfig c;
+  update_from_json(c, nlohmann::json{{"model_dir", "run"}, {"dafe_prior_dir", "stereo"}, {"drop_rate", 0.3}});
+  EXPECT_EQ(c.model_dir, "run");
+  EXPECT_EQ(c.dafe.prior, "stereo");
+  EXPECT_DOUBLE_EQ(c.dropgaussian_max_rate, 0.3);
+  nlohmann::json j;
+  to_json(j, c);
+  EXPECT_EQ(j["model_path"], "run");
+  EXPECT_EQ(j["dafe_prior"], "stereo");
+  EXPECT_FALSE(j.contains("model_dir"));
+  EXPECT_FALSE(j.contains("dafe_prior_dir"));
+  // A name and a former name of one option: refused, and nothing taken.
+  TrainConfig d;
+  const std::string twice = error_of([&] { update_from_json(d, nlohmann::json{{"dafe_prior", "a"}, {"dafe_prior_dir", "b"}, {"iterations", 5}}); });
+  EXPECT_NE(twice.find("a second time"), std::string::npos) << twice;
+  EXPECT_EQ(d.iterations, TrainConfig{}.iterations);
+  EXPECT_EQ(with_current_names(nlohmann::json{{"dafe_prior_dir", "x"}, {"seed", 1}, {"gone", 2}}),
+            (nlohmann::json{{"dafe_prior", "x"}, {"seed", 1}, {"gone", 2}}));
+}
+
+// A config.json written by d2gs 5e0b5a1 (before the names agreed; fern, D²GS, its saved split and
+// extent) is read as it was: every value taken under the option's current name.
+TEST(TrainOptions, ConfigJsonOfAnOlderRunIsRead) {
+  const nlohmann::json old = nlohmann::json::parse(read_file(test::source_dir() / "tests/train/fixtures/config_5e0b5a1_d2gs.json"));
+  ASSERT_TRUE(old.contains("dafe_prior_dir"));
+  ASSERT_TRUE(old.contains("model_dir"));
+  TrainConfig c;
+  update_from_json(c, old, RecordedKeys::Ignore);
+  nlohmann::json now;
+  to_json(now, c);
+  nlohmann::json expected = with_current_names(old);
+  for (const char* recorded : kRecordedKeys) expected.erase(recorded);
+  // Options added since (init_dense_method) take their defaults.
+  for (const TrainOption& o : train_options())
+    if (!expected.contains(o.name)) expected[o.name] = o.get(TrainConfig{});
+  EXPECT_EQ(now, expected);
+  EXPECT_NE(error_of([&] { update_from_json(c, old); }).find("unknown key"), std::string::npos)
+      << "the recorded keys are options only when asked to ignore them";
+}
+
+// validate() used to name --sh-increase-every, --min-opacity, --density-refresh-every and --log-every,
+// which did not exist: now each is a flag, and its range error names it.
+TEST(TrainCli, RangeErrorsNameFlagsThatExist) {
+  const auto dir = test::scratch_dir();
+  const std::string fern = (test::shared_data() / "nerf_llff_data/fern").string();
+  for (const auto& [args, expected] : std::vector<std::pair<std::string, std::string>>{
+           {"--sh-increase-every 0", "option --sh-increase-every must be > 0 (got 0)"},
+           {"--min-opacity 1", "option --min-opacity must be in [0, 1) (got 1)"},
+           {"--density-refresh-every -5", "option --density-refresh-every must be > 0 (got -5)"},
+           {"--log-every 0", "option --log-every must be > 0 (got 0)"},
+           {"--dropgaussian-max-rate 1.5", "option --dropgaussian-max-rate must be in [0, 1) (got 1.5)"},
+           {"--drop-rate 1.5", "option --dropgaussian-max-rate must be in [0, 1) (got 1.5)"},
+           {"-r 3", "option --resolution must be 1, 2, 4 or 8 (got 3)"},
+           {"--iterations many", "option --iterations: 'many' is not an integer"},
+           {"--dafe-mask-rule halfway", "option --dafe-mask-rule: 'halfway' is not one of percentile, threshold"},
+           {"--dafe-mask-rule threshold --dafe-tau 5", "option --dafe-tau must be a fraction in [0, 1] for the threshold rule (got 5)"}}) {
+    const auto r = test::run_cli(fmt::format("train -s '{}' -m '{}' {}", fern, (dir / "run").string(), args));
+    EXPECT_EQ(r.exit_code, 1) << args << "\n" << r.output;
+    EXPECT_NE(r.output.find("d2gs: error: " + expected), std::string::npos) << args << "\n" << r.output;
+    EXPECT_FALSE(std::filesystem::exists(dir / "run")) << args;
+  }
+  // A flag's --no- form.
+  const auto no = test::run_cli(fmt::format("train -s '{}' -m '{}' --no-dafe --no-dd-use-layers --method d2gs "
+                                            "--dafe-lambda -1", fern, (dir / "run").string()));
+  EXPECT_NE(no.output.find("option --dafe-lambda must be ≥ 0 (got -1)"), std::string::npos) << no.output;
+}
+
+// `d2gs train --help`: every option once, with its range and its default.
+TEST(TrainCli, HelpListsEveryOptionOnceWithItsRange) {
+  const auto r = test::run_cli("train --help");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  for (const TrainOption& o : train_options()) {
+    // The flag starts an entry ("  --flag" or "  -s,--flag") and appears nowhere else as an entry.
+    const std::string entry = (o.short_flag.empty() ? "  " : "  " + o.short_flag + ",") + o.flag();
+    EXPECT_EQ(test::count_occurrences(r.output, entry + " ") + test::count_occurrences(r.output, entry + ","), 1u)
+        << o.flag() << "\n" << r.output;
+    const auto at = r.output.find(entry);
+    ASSERT_NE(at, std::string::npos) << o.flag();
+    const std::string rest = r.output.substr(at, r.output.find("\n  -", at + 1) - at);
+    if (!o.range.empty()) {
+      EXPECT_NE(rest.find(o.range), std::string::npos) << o.flag() << ": " << rest;
+    }
+    EXPECT_NE(rest.find("default " + o.default_text()), std::string::npos) << o.flag() << ": " << rest;
+  }
+}
+
+}  // namespace
+}  // namespace d2gs
