@@ -13,6 +13,7 @@
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/random.hpp"
 #include "d2gs/train/checkpoint.hpp"
+#include "test_errors.hpp"
 #include "test_paths.hpp"
 
 namespace d2gs {
@@ -67,15 +68,6 @@ TrainingState state() {
   s.method.floats["empty"] = {};
   s.method.bytes["dafe_masks"] = {std::vector<std::uint8_t>(48, 1), {}, std::vector<std::uint8_t>(48, 0)};
   return s;
-}
-
-std::string error_of(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "";
 }
 
 TEST(Checkpoint, RoundTripIsExact) {
@@ -135,32 +127,32 @@ TEST(Checkpoint, DamageAnywhereIsRefusedWithOneLine) {
   for (std::size_t i = 0; i < bytes.size(); ++i) {
     std::string damaged = bytes;
     damaged[i] = static_cast<char>(damaged[i] ^ 0x10);
-    const std::string message = error_of([&] { (void)decode_checkpoint(damaged, "c.bin"); });
+    const std::string message = test::error_of([&] { (void)decode_checkpoint(damaged, "c.bin"); });
     ASSERT_EQ(message.rfind("c.bin: ", 0), 0u) << "byte " << i << " changed was not found: '" << message << "'";
     ASSERT_EQ(message.find('\n'), std::string::npos) << message;
   }
   // Every truncation.
   for (std::size_t n = 0; n < bytes.size(); ++n) {
-    const std::string message = error_of([&] { (void)decode_checkpoint(std::string_view(bytes).substr(0, n), "c.bin"); });
+    const std::string message = test::error_of([&] { (void)decode_checkpoint(std::string_view(bytes).substr(0, n), "c.bin"); });
     ASSERT_EQ(message.rfind("c.bin: ", 0), 0u) << "truncated to " << n << ": '" << message << "'";
   }
-  EXPECT_EQ(error_of([&] { (void)decode_checkpoint(bytes.substr(0, bytes.size() - 10), "c.bin"); }),
+  EXPECT_EQ(test::error_of([&] { (void)decode_checkpoint(bytes.substr(0, bytes.size() - 10), "c.bin"); }),
             fmt::format("c.bin: truncated checkpoint ({} bytes of {})", bytes.size() - 10, bytes.size()));
-  EXPECT_EQ(error_of([&] { (void)decode_checkpoint(bytes + "xyz", "c.bin"); }), "c.bin: damaged checkpoint: 3 bytes after its end");
+  EXPECT_EQ(test::error_of([&] { (void)decode_checkpoint(bytes + "xyz", "c.bin"); }), "c.bin: damaged checkpoint: 3 bytes after its end");
   std::string flipped = bytes;
   flipped[bytes.size() - 100] ^= 0x01;
-  EXPECT_EQ(error_of([&] { (void)decode_checkpoint(flipped, "c.bin"); }).rfind("c.bin: damaged checkpoint: CRC-32 mismatch", 0), 0u);
+  EXPECT_EQ(test::error_of([&] { (void)decode_checkpoint(flipped, "c.bin"); }).rfind("c.bin: damaged checkpoint: CRC-32 mismatch", 0), 0u);
 }
 
 TEST(Checkpoint, FormatNumbers) {
   std::string bytes = encode_checkpoint(identity(), state());
-  EXPECT_EQ(error_of([&] { (void)decode_checkpoint("D2GSCKPT1\n" + bytes.substr(10), "c.bin"); }),
+  EXPECT_EQ(test::error_of([&] { (void)decode_checkpoint("D2GSCKPT1\n" + bytes.substr(10), "c.bin"); }),
             "c.bin: checkpoint format 1 (written by d2gs before 2026-11-25) records neither the scene nor the split it was "
             "trained on, so a resume from it cannot be checked; train the run again");
-  EXPECT_EQ(error_of([&] { (void)decode_checkpoint("D2GSCKPT4\n" + bytes.substr(10), "c.bin"); }),
+  EXPECT_EQ(test::error_of([&] { (void)decode_checkpoint("D2GSCKPT4\n" + bytes.substr(10), "c.bin"); }),
             "c.bin: checkpoint format 4 is not one this d2gs reads (formats 2 and 3)");
   for (const char* other : {"", "D2GS", "D2GSCKPT", "D2GSCKPT\n", "D2GSCKPTx\n", "D2GSCKPT12345678\n", "ply\nformat"})
-    EXPECT_EQ(error_of([&] { (void)decode_checkpoint(other, "c.bin"); }), "c.bin: not a d2gs checkpoint") << other;
+    EXPECT_EQ(test::error_of([&] { (void)decode_checkpoint(other, "c.bin"); }), "c.bin: not a d2gs checkpoint") << other;
 }
 
 TEST(Checkpoint, ResumeRules) {
@@ -168,7 +160,7 @@ TEST(Checkpoint, ResumeRules) {
   Checkpoint c{r, state()};
   EXPECT_EQ(check_resume("c.bin", c, r, 100), "");
   const auto refused = [&](RunIdentity other, int iterations = 100) {
-    return error_of([&] { (void)check_resume("c.bin", c, other, iterations); });
+    return test::error_of([&] { (void)check_resume("c.bin", c, other, iterations); });
   };
   auto other = r;
   other.images_folder = "images";

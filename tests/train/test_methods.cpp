@@ -13,18 +13,11 @@
 #include "d2gs/train/dropout.hpp"
 #include "d2gs/train/losses.hpp"
 #include "d2gs/train/methods/method.hpp"
+#include "test_errors.hpp"
+#include "test_paths.hpp"
 
 namespace d2gs {
 namespace {
-
-std::string error_of(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "";
-}
 
 Gaussians random_model(std::size_t n) {
   Rng rng(5);
@@ -69,7 +62,7 @@ TEST(Methods, Registry) {
   EXPECT_EQ(find_training_method("nerf"), nullptr);
   TrainConfig c;
   c.method = "nerf";
-  EXPECT_EQ(error_of([&] { (void)make_training_method(c); }), "unknown method 'nerf' (expected 3dgs, dropgaussian or d2gs)");
+  EXPECT_EQ(test::error_of([&] { (void)make_training_method(c); }), "unknown method 'nerf' (expected 3dgs, dropgaussian or d2gs)");
 }
 
 TEST(Methods, Gs3dHasNoHooks) {
@@ -86,7 +79,7 @@ TEST(Methods, Gs3dHasNoHooks) {
   // A checkpoint holding state it does not keep is refused.
   MethodState s;
   s.floats["density_cache"] = {{0.5f}};
-  EXPECT_EQ(error_of([&] { m->check_state(s, {}); }), "it holds state 'density_cache', which --method 3dgs does not keep");
+  EXPECT_EQ(test::error_of([&] { m->check_state(s, {}); }), "it holds state 'density_cache', which --method 3dgs does not keep");
 }
 
 TEST(Methods, DropGaussianIsItsMaskAndRate) {
@@ -181,15 +174,15 @@ TEST(Methods, D2gsChecksItsCheckpointState) {
   MethodState s;
   s.floats["density_cache"] = {std::vector<float>(15, 0.5f)};
   s.bytes["dafe_masks"] = {std::vector<std::uint8_t>(48, 1), {}, std::vector<std::uint8_t>(48, 0)};
-  EXPECT_EQ(error_of([&] { m->check_state(s, run); }), "");
+  EXPECT_EQ(test::error_of([&] { m->check_state(s, run); }), "");
   s.bytes["dafe_masks"].pop_back();
-  EXPECT_EQ(error_of([&] { m->check_state(s, run); }), "it holds 2 DAFE masks for 3 training views");
+  EXPECT_EQ(test::error_of([&] { m->check_state(s, run); }), "it holds 2 DAFE masks for 3 training views");
   s.bytes["dafe_masks"] = {std::vector<std::uint8_t>(48, 1), std::vector<std::uint8_t>(47, 1), {}};
-  EXPECT_EQ(error_of([&] { m->check_state(s, run); }), "its DAFE mask of training view 10 has 47 pixels, the view 48");
+  EXPECT_EQ(test::error_of([&] { m->check_state(s, run); }), "its DAFE mask of training view 10 has 47 pixels, the view 48");
   s.bytes["dafe_masks"].clear();  // none yet: allowed
-  EXPECT_EQ(error_of([&] { m->check_state(s, run); }), "");
+  EXPECT_EQ(test::error_of([&] { m->check_state(s, run); }), "");
   s.bytes["other"] = {};
-  EXPECT_EQ(error_of([&] { m->check_state(s, run); }), "it holds state 'other', which --method d2gs does not keep");
+  EXPECT_EQ(test::error_of([&] { m->check_state(s, run); }), "it holds state 'other', which --method d2gs does not keep");
 }
 
 }  // namespace

@@ -13,19 +13,11 @@
 #include "d2gs/core/error.hpp"
 #include "d2gs/train/config.hpp"
 #include "d2gs/train/options.hpp"
+#include "test_errors.hpp"
 #include "test_paths.hpp"
 
 namespace d2gs {
 namespace {
-
-std::string error_of(const std::function<void()>& f) {
-  try {
-    f();
-  } catch (const Error& e) {
-    return e.what();
-  }
-  return "";
-}
 
 TEST(TrainOptions, OneNameForKeyAndFlagAndEveryKeyDeclared) {
   std::set<std::string> names;
@@ -51,7 +43,7 @@ TEST(TrainOptions, OneNameForKeyAndFlagAndEveryKeyDeclared) {
 // The defaults are within every declared range (validate() needs only the required paths).
 TEST(TrainOptions, DefaultsAreInRange) {
   const TrainConfig d;
-  for (const TrainOption& o : train_options()) EXPECT_EQ(error_of([&] { o.check(d); }), "") << o.name;
+  for (const TrainOption& o : train_options()) EXPECT_EQ(test::error_of([&] { o.check(d); }), "") << o.name;
 }
 
 // Former names: the config.json of a run trained before the names agreed, and an experiment's options.
@@ -69,7 +61,7 @@ TEST(TrainOptions, FormerNamesAreTakenAndWrittenUnderTheNewOnes) {
   EXPECT_FALSE(j.contains("dafe_prior_dir"));
   // A name and a former name of one option: refused, and nothing taken.
   TrainConfig d;
-  const std::string twice = error_of([&] { update_from_json(d, nlohmann::json{{"dafe_prior", "a"}, {"dafe_prior_dir", "b"}, {"iterations", 5}}); });
+  const std::string twice = test::error_of([&] { update_from_json(d, nlohmann::json{{"dafe_prior", "a"}, {"dafe_prior_dir", "b"}, {"iterations", 5}}); });
   EXPECT_NE(twice.find("a second time"), std::string::npos) << twice;
   EXPECT_EQ(d.iterations, TrainConfig{}.iterations);
   EXPECT_EQ(with_current_names(nlohmann::json{{"dafe_prior_dir", "x"}, {"seed", 1}, {"gone", 2}}),
@@ -92,7 +84,7 @@ TEST(TrainOptions, ConfigJsonOfAnOlderRunIsRead) {
   for (const TrainOption& o : train_options())
     if (!expected.contains(o.name)) expected[o.name] = o.get(TrainConfig{});
   EXPECT_EQ(now, expected);
-  EXPECT_NE(error_of([&] { update_from_json(c, old); }).find("unknown key"), std::string::npos)
+  EXPECT_NE(test::error_of([&] { update_from_json(c, old); }).find("unknown key"), std::string::npos)
       << "the recorded keys are options only when asked to ignore them";
 }
 
