@@ -111,6 +111,22 @@ Run add_init_command(CLI::App& app) {
   cmd->add_option("--fusion-min-pixels", o->geometry.patch_match_fusion.min_pixels,
                   "PatchMatch fusion: pixels (across views) a fused point needs")
       ->capture_default_str();
+  cmd->add_option("--fusion-max-normal", o->geometry.patch_match_fusion.max_normal_deg,
+                  "PatchMatch fusion: largest angle (degrees) between a pixel's normal and the point's first "
+                  "pixel's (COLMAP's max_normal_error)")
+      ->capture_default_str();
+  cmd->add_option("--fusion-max-depth-error", o->geometry.patch_match_fusion.max_relative_depth,
+                  "PatchMatch fusion: largest relative depth difference of a pixel to the point (COLMAP's "
+                  "max_depth_error)")
+      ->capture_default_str();
+  cmd->add_option("--fusion-max-reprojection-px", o->geometry.patch_match_fusion.max_reprojection_px,
+                  "PatchMatch fusion: largest reprojection error (pixels) of the point into a joining pixel "
+                  "(COLMAP's max_reproj_error)")
+      ->capture_default_str();
+  cmd->add_option("--pm-filter-geom-px", pm.filter_geom_max_px,
+                  "PatchMatch: largest forward-backward reprojection error (pixels) of a source that confirms a "
+                  "depth (COLMAP's filter_geom_consistency_max_cost)")
+      ->capture_default_str();
   cmd->add_option("--compare-cloud", o->compare_cloud,
                   "Also measure the dense cloud against this PLY (e.g. another pipeline's fused cloud): accuracy "
                   "(ours to theirs) and completeness (theirs to ours), written to DIR/compare_cloud.json");

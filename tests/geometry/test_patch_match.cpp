@@ -354,6 +354,14 @@ TEST(PatchMatch, BadInputsGiveOneLineErrors) {
   bad.filter_min_triangulation_angle_deg = -1.0;
   expect_error([&] { (void)patch_match_stereo(v.cam_ptrs(), v.image_ptrs(), v.ranges, bad); },
                "smallest triangulation angle must be in [0, 90) degrees, got -1");
+  bad = quick_options();
+  bad.filter_geom_max_px = 0.0;
+  expect_error([&] { (void)patch_match_stereo(v.cam_ptrs(), v.image_ptrs(), v.ranges, bad); },
+               "largest forward-backward error must be positive, got 0 px");
+  bad = quick_options();
+  bad.filter_min_ncc = 1.5;
+  expect_error([&] { (void)patch_match_stereo(v.cam_ptrs(), v.image_ptrs(), v.ranges, bad); },
+               "smallest NCC must be in [-1, 1], got 1.5");
 }
 
 // The filter's triangulation angle (d2gs init --pm-filter-min-angle): 0 keeps every depth the sources

@@ -488,6 +488,10 @@ void validate(const PatchMatchOptions& o) {
   if (!(o.geom_weight >= 0) || !(o.geom_max_px > 0))
     fail("patch match: geometric weight must be ≥ 0 and its maximum positive");
   if (o.filter_min_consistent < 0) fail("patch match: filter_min_consistent must be ≥ 0");
+  if (!(o.filter_geom_max_px > 0))
+    fail("patch match: the filter's largest forward-backward error must be positive, got {} px", o.filter_geom_max_px);
+  if (!(o.filter_min_ncc >= -1 && o.filter_min_ncc <= 1))
+    fail("patch match: the filter's smallest NCC must be in [-1, 1], got {}", o.filter_min_ncc);
   if (!(o.filter_min_triangulation_angle_deg >= 0 && o.filter_min_triangulation_angle_deg < 90))
     fail("patch match: the filter's smallest triangulation angle must be in [0, 90) degrees, got {}",
          o.filter_min_triangulation_angle_deg);
