@@ -255,7 +255,27 @@ TEST(PatchMatch, FusedCloudLiesOnTheTrueSurfaces) {
               cloud.size(), median, p90, 100.0 * static_cast<double>(normal_ok) / static_cast<double>(rel.size()));
   EXPECT_LT(median, 0.2);
   EXPECT_LT(p90, 1.0);
-  EXPECT_GT(static_cast<double>(normal_ok) / static_cast<double>(rel.size()), 0.6);
+  // The default has no normal test (patch_match_fusion.hpp): the normals are means of whatever joined.
+  EXPECT_GT(static_cast<double>(normal_ok) / static_cast<double>(rel.size()), 0.5);
+  // COLMAP's 10° normal test keeps fewer points, with normals closer to the surface's.
+  {
+    PatchMatchFusionOptions strict = fo;
+    strict.max_normal_deg = 10.0;
+    const PointCloud s10 = fuse_patch_match(v.cam_ptrs(), v.image_ptrs(), synthetic_maps(), strict);
+    std::size_t inside = 0, ok10 = 0;
+    for (std::size_t k = 0; k < s10.size(); ++k) {
+      const glm::dvec2 u = project(c, glm::dvec3(s10.positions[k]));
+      if (u.x < 0 || u.y < 0 || u.x >= c.width || u.y >= c.height) continue;
+      ++inside;
+      ok10 += glm::dot(glm::dvec3(s10.normals[k]), scene().trace(c, u.x, u.y).normal) > std::cos(glm::radians(20.0));
+    }
+    std::printf("fused with the 10° normal test: %zu points, normals within 20°: %.1f %%\n", s10.size(),
+                100.0 * static_cast<double>(ok10) / static_cast<double>(inside));
+    EXPECT_LT(s10.size(), cloud.size());
+    EXPECT_GT(static_cast<double>(ok10) / static_cast<double>(inside), 0.6);
+    EXPECT_GT(static_cast<double>(ok10) / static_cast<double>(inside),
+              static_cast<double>(normal_ok) / static_cast<double>(rel.size()));
+  }
   // The stride keeps about 1/stride² of the points; a higher pixel minimum keeps fewer.
   fo.pixel_stride = 4;
   const std::size_t strided = fuse_patch_match(v.cam_ptrs(), v.image_ptrs(), synthetic_maps(), fo).size();
@@ -427,7 +447,9 @@ TEST(TrainingGeometry, PatchMatchPipelineReadsOnlyTrainingViewsAndLiesOnTheSurfa
   std::sort(rel.begin(), rel.end());
   std::printf("pipeline: %zu sparse, %zu dense points; median relative depth error %.4f\n", g.sparse.size(),
               g.dense.size(), rel[rel.size() / 2]);
-  EXPECT_LT(rel[rel.size() / 2], 0.01);
+  // The defaults keep small-angle depths and skip the normal test (more coverage, a little less accuracy:
+  // patch_match.hpp, patch_match_fusion.hpp); 1.2 % here, under 1 % with COLMAP's nominal 3° and 10°.
+  EXPECT_LT(rel[rel.size() / 2], 0.015);
 }
 
 TEST(TrainingGeometry, GeometryResolutionFollowsTheMethodAndTheCap) {

@@ -58,8 +58,12 @@ struct PatchMatchOptions {
   // agrees when its NCC ≥ filter_min_ncc, the triangulation angle ≥ filter_min_triangulation_angle_deg and
   // the forward–backward error ≤ filter_geom_max_px; a depth is kept when ≥ filter_min_consistent agree
   // (0: no filter).
+  // The angle: COLMAP's nominal 3° never fired in the COLMAP that made the published sparse-view clouds (its
+  // viewing-angle cosine had the wrong sign until COLMAP 8ce44e9, 2026-02), and the far background, seen
+  // at small angles, is what a sparse-view init needs most: on fern, 0° instead of 3° is worth 0.8 dB of
+  // DropGaussian's test PSNR at iteration 2 000 (docs/benchmarks.md, "What the far background is worth").
   double filter_min_ncc = 0.1;
-  double filter_min_triangulation_angle_deg = 3.0;
+  double filter_min_triangulation_angle_deg = 0.0;
   double filter_geom_max_px = 1.0;
   int filter_min_consistent = 1;
   std::uint64_t seed = 0;
