@@ -29,7 +29,7 @@ struct InitOptions {
   bool white_background = false;
   bool no_dense = false;
   bool oracle_accuracy = false;
-  std::string dense_method = "sgbm", geometry_resolution = "auto", compare_cloud;
+  std::string dense_method = "patchmatch", geometry_resolution = "auto", compare_cloud;
   int dense_stride = 0;  // 0: each method's default
   TrainingGeometryOptions geometry;
 };
@@ -71,8 +71,10 @@ Run add_init_command(CLI::App& app) {
   cmd->add_option("--min-angle", o->geometry.triangulation.min_angle_deg, "Smallest triangulation angle (degrees)");
   cmd->add_flag("--no-dense", o->no_dense, "Sparse points only (no stereo, no depth maps)");
   cmd->add_option("--dense-method", o->dense_method,
-                  "'sgbm' (default: rectified semi-global matching between neighbouring views) or 'patchmatch' "
-                  "(PatchMatch multi-view stereo with geometric consistency and COLMAP-like fusion)")
+                  "'patchmatch' (default: PatchMatch multi-view stereo with geometric consistency and COLMAP-like "
+                  "fusion, at the highest resolution of the scene folder) or 'sgbm' (rectified semi-global "
+                  "matching between neighbouring views at the training resolution: seconds instead of a minute "
+                  "or two, about 1.5 dB less on fern)")
       ->check(CLI::IsMember({"sgbm", "patchmatch"}));
   cmd->add_option("--geometry-resolution", o->geometry_resolution,
                   "Images the geometry is computed from: 'training' (-r), 'highest' (the largest image folder, "

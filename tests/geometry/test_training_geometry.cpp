@@ -134,7 +134,7 @@ TEST(TrainingGeometry, ViewsThatDoNotOverlapGiveAOneLineError) {
 TEST(TrainingGeometry, InitCommandWritesTheLayoutAndTheTrainerLoadsItsDepthPriors) {
   const auto dir = test::scratch_dir();
   const auto r = test::run_cli(
-      fmt::format("init -s '{}' --n-views 3 -r 8 -o '{}' --oracle-accuracy", fern().string(), (dir / "init").string()));
+      fmt::format("init -s '{}' --n-views 3 -r 8 -o '{}' --oracle-accuracy --dense-method sgbm", fern().string(), (dir / "init").string()));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("SIFT"), std::string::npos) << r.output;
   const auto m = nlohmann::json::parse(read_file(dir / "init/init.json"));
@@ -178,7 +178,7 @@ TEST(TrainingGeometry, InitWritesThePublishedLayoutAndTrainReusesIt) {
   ASSERT_EQ(r.exit_code, 0) << r.output;
   // Progress and timing of every step.
   for (const char* step : {"init: read 3 training views", "init: SIFT:", "init: matching 3 pairs", " tracks (",
-                           "init: stereo on", "init: fusion:"})
+                           "init: PatchMatch stereo on 3 views", "init: fusion:"})
     EXPECT_NE(r.output.find(step), std::string::npos) << step << "\n" << r.output;
   const fs::path views = scene / "3_views";
   for (const char* file : {"init.json", "sparse/points3D.ply", "dense/fused.ply", "depth/image001.npy",

@@ -38,8 +38,9 @@ struct TrainConfig {
   // initial Gaussians: "dense" (stereo + fusion of the training views), "sparse" (SIFT triangulation of
   // the training views), a PLY path, "random", or "sfm-all-views" (oracle: saw the test views)
   std::string init = "dense";
-  // stereo of --init dense / sparse and of --dafe-prior stereo: "sgbm" or "patchmatch" (d2gs init --dense-method)
-  std::string init_dense_method = "sgbm";
+  // stereo of --init dense / sparse and of --dafe-prior stereo: "patchmatch" or "sgbm" (d2gs init --dense-method;
+  // docs/benchmarks.md, "What the far background is worth")
+  std::string init_dense_method = "patchmatch";
   int random_points = 10000;
 
   // optimisation

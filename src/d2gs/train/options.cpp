@@ -301,9 +301,9 @@ std::vector<TrainOption> declare() {
                     "PLY file, 'random', or 'sfm-all-views' (the dataset's points3D: an ORACLE, it saw the test views)"},
                    [](auto& c) -> auto& { return c.init; }, Path, {"dense", "sparse", "random", "sfm-all-views"}));
   t.push_back(choice({"init_dense_method", init,
-                      "Stereo of --init dense (and of --dafe-prior stereo): 'sgbm' (rectified SGBM at the training "
-                      "resolution) or 'patchmatch' (PatchMatch multi-view stereo at the highest resolution of the "
-                      "scene folder, as `d2gs init --dense-method patchmatch`)"},
+                      "Stereo of --init dense (and of --dafe-prior stereo): 'patchmatch' (PatchMatch multi-view "
+                      "stereo at the highest resolution of the scene folder, as `d2gs init`) or 'sgbm' (rectified "
+                      "SGBM at the training resolution, as `d2gs init --dense-method sgbm`)"},
                      [](auto& c) -> auto& { return c.init_dense_method; },
                      {{"sgbm", "sgbm"}, {"patchmatch", "patchmatch"}}));
   t.push_back(number({"random_points", init,
