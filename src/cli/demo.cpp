@@ -19,11 +19,11 @@
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/image.hpp"
 #include "d2gs/core/npy.hpp"
+#include "d2gs/demo/synthetic_scene.hpp"
 #include "d2gs/model/ply.hpp"
 #include "d2gs/report/run_report.hpp"
 #include "d2gs/scene/scene.hpp"
 #include "d2gs/scene/split.hpp"
-#include "d2gs/scene/synthetic_scene.hpp"
 #include "d2gs/train/trainer.hpp"
 
 namespace d2gs::cli {

@@ -17,16 +17,16 @@
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/file_lock.hpp"
 #include "d2gs/core/random.hpp"
+#include "d2gs/eval/ssim.hpp"
+#include "d2gs/geometry/training_geometry.hpp"
 #include "d2gs/model/ply.hpp"
 #include "d2gs/render/activations.hpp"
 #include "d2gs/render/rasterizer.hpp"
 #include "d2gs/train/checkpoint.hpp"
 #include "d2gs/train/densify.hpp"
-#include "d2gs/geometry/training_geometry.hpp"
 #include "d2gs/train/initialize.hpp"
 #include "d2gs/train/losses.hpp"
 #include "d2gs/train/methods/method.hpp"
-#include "d2gs/train/ssim.hpp"
 
 namespace d2gs {
 namespace fs = std::filesystem;
