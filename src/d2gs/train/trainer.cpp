@@ -203,12 +203,11 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
   std::error_code ec;
   if (fs::exists(s.cfg.model_dir, ec) && !fs::is_directory(s.cfg.model_dir, ec))
     fail_file(s.cfg.model_dir, "exists and is not a folder");
-  s.scene = load_scene(s.cfg.source, scene_load_options(s.cfg));
-  SplitOptions so;
-  so.n_views = s.cfg.n_views;
-  so.train_views = s.cfg.train_views;
-  so.test_views = s.cfg.test_views;
-  s.split = make_split(s.scene, so);
+  {
+    SceneAndSplit loaded = load_scene_and_split(s.cfg.source, scene_load_options(s.cfg), split_options(s.cfg));
+    s.scene = std::move(loaded.scene);
+    s.split = std::move(loaded.split);
+  }
   if (s.split.train.empty()) fail("{}: no training views", s.cfg.source);
   // The training-view geometry (init dense/sparse, D²GS's DAFE prior "stereo"): SCENE/{N}_views written
   // by `d2gs init` when it matches, else MODEL/init (built there once, reused on --resume).
