@@ -1,6 +1,7 @@
 # The include check of the room layering (cmake/Rooms.cmake): every `#include "d2gs/ROOM/..."` in a room's
-# folder must name the room itself or a room it may use. One line per include that climbs a layer, then
-# a failure. Run by the build before each room's library (d2gs_ROOM_layering) and by ctest (room_layering):
+# folder must name the room itself or a room it may use, and none may include the program's "cli/...".
+# One line per include that climbs a layer, then a failure. Run by the build before each room's library
+# (d2gs_ROOM_layering) and by ctest (room_layering):
 #   cmake -DSOURCE_DIR=<repo>/src/d2gs -DRULES="core=|model=core|scene=core,model|..." [-DROOM=scene]
 #         -P cmake/check_room_includes.cmake
 # RULES is the table of src/d2gs/CMakeLists.txt, room=its uses; without ROOM every room is checked.
@@ -36,10 +37,14 @@ foreach(room IN LISTS checked)
        "${SOURCE_DIR}/${room}/*.h" "${SOURCE_DIR}/${room}/*.cu" "${SOURCE_DIR}/${room}/*.cuh")
   list(SORT files)
   foreach(file IN LISTS files)
-    file(STRINGS "${file}" includes REGEX "^[ \t]*#[ \t]*include[ \t]*[<\"]d2gs/[^/]+/")
+    # The library's own headers, and the program's (src/cli/), which no room may include.
+    file(STRINGS "${file}" includes REGEX "^[ \t]*#[ \t]*include[ \t]*[<\"](d2gs/[^/]+|cli)/")
     foreach(include IN LISTS includes)
-      string(REGEX MATCH "d2gs/([^/]+)/[^>\"]*" target "${include}")
-      set(used "${CMAKE_MATCH_1}")
+      string(REGEX MATCH "(d2gs/([^/]+)|cli)/[^>\"]*" target "${include}")
+      set(used "${CMAKE_MATCH_2}")
+      if(CMAKE_MATCH_1 STREQUAL "cli")
+        set(used cli)
+      endif()
       if(used STREQUAL room OR used IN_LIST uses_${room})
         continue()
       endif()
