@@ -19,11 +19,11 @@
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/image.hpp"
 #include "d2gs/core/npy.hpp"
+#include "d2gs/demo/synthetic_scene.hpp"
 #include "d2gs/model/ply.hpp"
 #include "d2gs/report/run_report.hpp"
 #include "d2gs/scene/scene.hpp"
 #include "d2gs/scene/split.hpp"
-#include "d2gs/scene/synthetic_scene.hpp"
 #include "d2gs/train/trainer.hpp"
 
 namespace d2gs::cli {
@@ -141,7 +141,7 @@ int run_demo(const DemoOptions& opt) {
     // Written beside the scene, so that the run's recorded init names a file that exists.
     SplitOptions so;
     so.n_views = opt.train_views;
-    const Split split = make_split(load_scene(dir), so);
+    const Split split = load_scene_and_split(dir, {}, so).split;
     const auto ply = dir / "init_training_views.ply";
     write_point_cloud_ply(ply, training_view_points(dir, split.train, 10000 / std::max<int>(1, split.train.size())));
     c.init = ply.string();

@@ -13,6 +13,7 @@
 #include "d2gs/model/ply.hpp"
 #include "d2gs/report/run_report.hpp"
 #include "d2gs/train/config.hpp"
+#include "d2gs/train/outputs.hpp"
 
 namespace d2gs::cli {
 namespace fs = std::filesystem;
@@ -112,15 +113,9 @@ Run add_eval_command(CLI::App& app) {
     eo.lpips_range = range;
     eo.lpips_skipped = "no LPIPS weights given (--lpips-weights FILE or D2GS_LPIPS_WEIGHTS)";
     const EvalSummary summary = evaluate_views(model, scene, test, eo);
-    nlohmann::json j;
-    to_json(j, summary);
-    j["method"] = c.method;
-    j["iteration"] = it;
-    j["gaussians"] = model.size();
-    j["init_is_oracle"] = oracle;
-    j["image_source"] = to_string(scene.image_source);
-    j["images_folder"] = scene.images_folder;
-    write_file_atomic(run / "results.json", j.dump(2));
+    const nlohmann::json j = write_results_json(run, summary, scene,
+                                                {.method = c.method, .iteration = it, .gaussians = model.size(),
+                                                 .init_is_oracle = oracle, .train_seconds = std::nullopt});
     if (*json_only) std::printf("%s\n", j.dump(2).c_str());
     else std::printf("%s(%s, iteration %d, %zu Gaussians%s)\nwritten %s\n", format_table(summary).c_str(),
                      c.method.c_str(), it, model.size(), oracle ? ", ORACLE init" : "", (run / "results.json").c_str());

@@ -18,6 +18,7 @@
 #include <nlohmann/json.hpp>
 
 #include "cli/commands.hpp"
+#include "cli/scene_flags.hpp"
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/json_value.hpp"
@@ -263,7 +264,7 @@ Run add_imr_command(CLI::App& app) {
   sub->add_option("models", o->inputs, "PLY model files or training run folders (highest point_cloud/iteration_N)")
       ->required();
   sub->add_option("-s,--source", o->source, "Scene whose camera is the depth-strata reference (metadata only)");
-  sub->add_option("-r,--resolution", o->resolution, "Resolution 1/R used to load the scene")->capture_default_str();
+  add_resolution_flag(*sub, o->resolution);
   sub->add_option("--reference-camera", o->reference_camera, "Camera index in the scene (0 = release: image 0)")
       ->capture_default_str();
   sub->add_option("--epsilon", o->epsilon, "Entropic regularisation (on the normalised cost)")->capture_default_str();

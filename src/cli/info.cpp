@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 
 #include "cli/commands.hpp"
+#include "cli/scene_flags.hpp"
 #include "d2gs/core/error.hpp"
 #include "d2gs/scene/scene.hpp"
 #include "d2gs/scene/split.hpp"
@@ -17,12 +18,7 @@ namespace d2gs::cli {
 namespace {
 
 struct InfoOptions {
-  std::string source;
-  int resolution = 1;
-  int n_views = 0;
-  std::vector<int> train_views;
-  std::vector<int> test_views;
-  bool white_background = false;
+  SceneFlags scene;
   bool json = false;
 };
 
@@ -111,25 +107,10 @@ void print_table(const Scene& scene, const Split& split) {
 Run add_info_command(CLI::App& app) {
   auto opts = std::make_shared<InfoOptions>();
   auto* sub = app.add_subcommand("info", "Print a scene's format, cameras, sparse-view split and point count");
-  sub->add_option("-s,--source", opts->source, "Scene folder (COLMAP sparse/0, LLFF poses_bounds.npy or Blender)")
-      ->required();
-  sub->add_option("-r,--resolution", opts->resolution, "Image resolution 1/R: 1, 2, 4 or 8")->capture_default_str();
-  sub->add_option("--n-views", opts->n_views, "Training views (0 = every non-test view)")->capture_default_str();
-  sub->add_option("--train-views", opts->train_views, "Explicit training views (global indices, e.g. 1,10,19)")
-      ->delimiter(',');
-  sub->add_option("--test-views", opts->test_views, "Explicit test views (global indices)")->delimiter(',');
-  sub->add_flag("--white-background", opts->white_background, "Composite RGBA images on white (default black)");
+  add_scene_flags(*sub, opts->scene, SplitFlags::All);
   sub->add_flag("--json", opts->json, "Machine-readable output");
   return [opts]() -> int {
-    SceneLoadOptions load;
-    load.resolution = opts->resolution;
-    load.background = glm::vec3(opts->white_background ? 1.0f : 0.0f);
-    const Scene scene = load_scene(opts->source, load);
-    SplitOptions so;
-    so.n_views = opts->n_views;
-    so.train_views = opts->train_views;
-    so.test_views = opts->test_views;
-    const Split split = make_split(scene, so);
+    const auto [scene, split] = opts->scene.load();
     if (opts->json) {
       const std::string text = to_json(scene, split).dump(2, ' ', false, nlohmann::ordered_json::error_handler_t::replace) + "\n";
       std::fputs(text.c_str(), stdout);

@@ -11,6 +11,7 @@
 #include <spdlog/spdlog.h>
 
 #include "cli/commands.hpp"
+#include "cli/scene_flags.hpp"
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
 #include "d2gs/geometry/training_geometry.hpp"
@@ -22,11 +23,8 @@ namespace d2gs::cli {
 namespace {
 
 struct InitOptions {
-  std::string source, output;
-  int resolution = 1;
-  int n_views = 0;
-  std::vector<int> train_views, test_views;
-  bool white_background = false;
+  SceneFlags scene;
+  std::string output;
   bool no_dense = false;
   bool oracle_accuracy = false;
   std::string dense_method = "patchmatch", geometry_resolution = "auto", compare_cloud;
@@ -48,13 +46,8 @@ Run add_init_command(CLI::App& app) {
       "normals); SGBM (default) runs at the training resolution.\n"
       "Example: d2gs init -s ../shared/data/nerf_llff_data/fern --n-views 3 -r 8 -o out/fern_init");
   auto o = std::make_shared<InitOptions>();
-  cmd->add_option("-s,--source", o->source, "Scene folder (COLMAP, LLFF or Blender)")->required();
+  add_scene_flags(*cmd, o->scene, SplitFlags::All);
   cmd->add_option("-o,--output", o->output, "Output folder (default: SCENE/{N}_views)");
-  cmd->add_option("-r,--resolution", o->resolution, "1/R of full resolution: 1, 2, 4 or 8");
-  cmd->add_option("--n-views", o->n_views, "Training views of the sparse-view split (0 = all non-test views)");
-  cmd->add_option("--train-views", o->train_views, "Explicit training views (global indices)")->delimiter(',');
-  cmd->add_option("--test-views", o->test_views, "Explicit test views (global indices)")->delimiter(',');
-  cmd->add_flag("--white-background", o->white_background, "White background (Blender scenes)");
   cmd->add_option("--seed", o->geometry.seed, "Seed of the random choices (subsampling of large dense clouds)")
       ->check(not_negative());
   cmd->add_option("--max-features", o->geometry.max_features, "SIFT keypoints per view");
@@ -135,15 +128,7 @@ Run add_init_command(CLI::App& app) {
   cmd->add_flag("--oracle-accuracy", o->oracle_accuracy,
                 "Also measure the clouds against the dataset's all-view SfM points (measurement only)");
   return [o]() -> int {
-    SceneLoadOptions lo;
-    lo.resolution = o->resolution;
-    lo.background = o->white_background ? glm::vec3(1.0f) : glm::vec3(0.0f);
-    const Scene scene = load_scene(o->source, lo);
-    SplitOptions so;
-    so.n_views = o->n_views;
-    so.train_views = o->train_views;
-    so.test_views = o->test_views;
-    const Split split = make_split(scene, so);
+    const auto [scene, split] = o->scene.load();
     TrainingGeometryOptions g = o->geometry;
     g.dense = !o->no_dense;
     g.dense_method = parse_dense_method(o->dense_method);
@@ -187,7 +172,7 @@ Run add_init_command(CLI::App& app) {
       write_file_atomic(dir / "compare_cloud.json", j.dump(2));
     }
     if (o->oracle_accuracy) {
-      if (scene.sfm_points.empty()) fail("{}: the scene has no SfM points to measure against", o->source);
+      if (scene.sfm_points.empty()) fail("{}: the scene has no SfM points to measure against", o->scene.source);
       nlohmann::json acc;
       const auto report = [&](const char* name, const PointCloud& cloud) {
         const CloudAccuracy a = cloud_accuracy(cloud, scene.sfm_points);

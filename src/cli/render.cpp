@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "cli/commands.hpp"
+#include "cli/scene_flags.hpp"
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/image.hpp"
@@ -27,15 +28,12 @@ namespace {
 
 struct RenderCommandOptions {
   std::string model;
-  std::string source;
+  SceneFlags scene;
   std::string output;
   std::string split = "test";
-  int resolution = 1;
-  int n_views = 0;
   int sh_degree = -1;
   bool depth = false;
   bool alpha = false;
-  bool white_background = false;
 };
 
 int run_render(const RenderCommandOptions& o) {
@@ -48,13 +46,7 @@ int run_render(const RenderCommandOptions& o) {
   if (o.sh_degree > model.sh_degree)
     fail("option --sh-degree {} is above the SH degree {} of the model {} (use 0..{}, or -1 for the model's)",
          o.sh_degree, model.sh_degree, o.model, model.sh_degree);
-  SceneLoadOptions load;
-  load.resolution = o.resolution;
-  load.background = glm::vec3(o.white_background ? 1.0f : 0.0f);
-  const Scene scene = load_scene(o.source, load);
-  SplitOptions split_options;
-  split_options.n_views = o.n_views;
-  const Split split = make_split(scene, split_options);
+  const auto [scene, split] = o.scene.load();
   std::vector<int> views;
   if (o.split == "test") views = split.test;
   else if (o.split == "train") views = split.train;
@@ -64,10 +56,10 @@ int run_render(const RenderCommandOptions& o) {
 
   auto rasterizer = render::make_cpu_rasterizer();
   render::RenderOptions ro;
-  ro.background = load.background;
+  ro.background = scene.background;
   ro.sh_degree = o.sh_degree;
   spdlog::info("render: {} Gaussians (SH degree {}), {} {} view(s) of {} -> {}", model.size(), model.sh_degree,
-               views.size(), o.split, o.source, out_dir.string());
+               views.size(), o.split, o.scene.source, out_dir.string());
   for (const int v : views) {
     const Camera& cam = scene.cameras[static_cast<std::size_t>(v)];
     const auto& out = rasterizer->forward(model, nullptr, render::make_render_camera(cam), ro);
@@ -101,12 +93,8 @@ Run add_render_command(CLI::App& app) {
   sub->add_option("--model,-m", opts->model, "Model PLY (e.g. MODEL_DIR/point_cloud/iteration_10000/point_cloud.ply)")
       ->required()
       ->check(CLI::ExistingFile);
-  sub->add_option("-s,--source", opts->source, "Scene folder (COLMAP sparse/0, LLFF poses_bounds.npy or Blender)")
-      ->required();
+  add_scene_flags(*sub, opts->scene, SplitFlags::NViews);
   sub->add_option("-o,--output", opts->output, "Output folder")->required();
-  sub->add_option("-r,--resolution", opts->resolution, "Image resolution 1/R: 1, 2, 4 or 8")->capture_default_str();
-  sub->add_option("--n-views", opts->n_views, "Training views of the split (0 = every non-test view)")
-      ->capture_default_str();
   sub->add_option("--split", opts->split, "Views to render: test, train or all")->capture_default_str();
   sub->add_option("--sh-degree", opts->sh_degree, "Active SH degree, 0..3 and at most the model's (-1 = the model's)")
       ->capture_default_str()
@@ -114,7 +102,6 @@ Run add_render_command(CLI::App& app) {
   sub->add_flag("--depth", opts->depth,
                 "Also write <name>_depth.npy (float32, view-space z / alpha) and <name>_depth.png (16-bit, z*1000)");
   sub->add_flag("--alpha", opts->alpha, "Also write <name>_alpha.png (8-bit accumulated opacity)");
-  sub->add_flag("--white-background", opts->white_background, "Render on white (default black)");
   return [opts]() -> int { return run_render(*opts); };
 }
 

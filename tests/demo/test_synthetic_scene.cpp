@@ -1,5 +1,5 @@
-// The built-in synthetic demo scene (src/d2gs/scene/synthetic_scene.hpp) and `d2gs demo`.
-#include "d2gs/scene/synthetic_scene.hpp"
+// The built-in synthetic demo scene (src/d2gs/demo/synthetic_scene.hpp) and `d2gs demo`.
+#include "d2gs/demo/synthetic_scene.hpp"
 
 #include <gtest/gtest.h>
 #include <omp.h>

@@ -9,7 +9,7 @@
 #include <fmt/format.h>
 
 #include "d2gs/core/image.hpp"
-#include "d2gs/scene/synthetic_scene.hpp"
+#include "d2gs/demo/synthetic_scene.hpp"
 
 namespace d2gs::test {
 

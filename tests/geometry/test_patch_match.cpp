@@ -13,12 +13,12 @@
 
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/random.hpp"
+#include "d2gs/demo/synthetic_scene.hpp"
 #include "d2gs/geometry/fusion.hpp"
 #include "d2gs/geometry/patch_match.hpp"
 #include "d2gs/geometry/patch_match_fusion.hpp"
 #include "d2gs/geometry/training_geometry.hpp"
 #include "d2gs/scene/split.hpp"
-#include "d2gs/scene/synthetic_scene.hpp"
 #include "synthetic_fixture.hpp"
 #include "test_paths.hpp"
 

@@ -7,10 +7,10 @@
 
 #include <fmt/format.h>
 
+#include "d2gs/demo/synthetic_scene.hpp"
 #include "d2gs/geometry/fusion.hpp"
 #include "d2gs/geometry/stereo.hpp"
 #include "d2gs/geometry/training_geometry.hpp"
-#include "d2gs/scene/synthetic_scene.hpp"
 #include "synthetic_fixture.hpp"
 #include "test_paths.hpp"
 

@@ -15,15 +15,6 @@ TEST(L1, ValueAndGradient) {
   EXPECT_EQ(g, (std::vector<float>{0.2f, 0.0f, -0.2f, 0.2f}));
 }
 
-TEST(Percentile, MatchesNumpyLinearInterpolation) {
-  // np.percentile([1, 2, 3, 4], 10) = 1.3 ; np.percentile([5, 1, 3], 50) = 3 ; 95 of 0..100 = 95.
-  EXPECT_NEAR(percentile({1, 2, 3, 4}, 10), 1.3, 1e-6);
-  EXPECT_NEAR(percentile({5, 1, 3}, 50), 3.0, 1e-12);
-  std::vector<float> v(101);
-  for (int i = 0; i <= 100; ++i) v[i] = static_cast<float>(i);
-  EXPECT_NEAR(percentile(v, 95), 95.0, 1e-9);
-}
-
 TEST(DafeMask, PercentileSelectsTheFarthestPixels) {
   // 20 pixels with depth 1..20: np.percentile(depth, 90) = 18.1, so the mask holds depths 19 and 20.
   std::vector<float> depth(20);

@@ -9,6 +9,28 @@
 
 namespace d2gs {
 
+// SplitMix64 (Steele, Lea and Flood 2014): a 64-bit counter passed through a mixing function. Rng draws
+// its seed words from it; the demo scene (demo/synthetic_scene.cpp) uses it directly as a small
+// stream of uniforms.
+class SplitMix64 {
+public:
+  explicit SplitMix64(std::uint64_t seed = 0) : state_(seed) {}
+  std::uint64_t next_u64() { return mix(state_ += 0x9e3779b97f4a7c15ull); }
+  // Uniform in [0, 1) with 53 random bits.
+  double uniform() { return static_cast<double>(next_u64() >> 11) * 0x1.0p-53; }
+  // Uniform in [lo, hi).
+  double uniform(double lo, double hi) { return lo + (hi - lo) * uniform(); }
+  // The finalizer alone (a 64-bit hash).
+  static std::uint64_t mix(std::uint64_t z) {
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+    return z ^ (z >> 31);
+  }
+
+private:
+  std::uint64_t state_;
+};
+
 class Rng {
 public:
   explicit Rng(std::uint64_t seed = 0) { reseed(seed); }
@@ -16,12 +38,12 @@ public:
   static Rng stream(std::uint64_t seed, std::string_view name) {
     std::uint64_t h = 1469598103934665603ull;  // FNV-1a of the name, mixed with the seed
     for (char c : name) h = (h ^ static_cast<unsigned char>(c)) * 1099511628211ull;
-    return Rng(seed ^ splitmix(h));
+    return Rng(seed ^ SplitMix64::mix(h));
   }
 
   void reseed(std::uint64_t seed) {
-    std::uint64_t x = seed;
-    for (auto& s : state_) s = splitmix_next(x);
+    SplitMix64 words(seed);
+    for (auto& s : state_) s = words.next_u64();
     has_spare_ = false;
   }
 
@@ -80,12 +102,6 @@ public:
 
 private:
   static std::uint64_t rotl(std::uint64_t x, int k) { return (x << k) | (x >> (64 - k)); }
-  static std::uint64_t splitmix(std::uint64_t z) {
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-    return z ^ (z >> 31);
-  }
-  static std::uint64_t splitmix_next(std::uint64_t& x) { return splitmix(x += 0x9e3779b97f4a7c15ull); }
   std::uint64_t state_[4]{};
   double spare_ = 0.0;
   bool has_spare_ = false;

@@ -1,5 +1,5 @@
 #pragma once
-// Hot loops (eval/sinkhorn, eval/imr, train/ssim) are compiled for several x86-64 levels and picked at
+// Hot loops (eval/sinkhorn, eval/imr, eval/ssim) are compiled for several x86-64 levels and picked at
 // load time (GCC function multi-versioning), so a portable build still runs AVX2 / AVX-512 code where
 // the CPU has it.
 // Elsewhere (other compilers, other architectures, or -DD2GS_NO_TARGET_CLONES) the plain build is used.

@@ -7,6 +7,7 @@
 #include <utility>
 
 #include "d2gs/core/error.hpp"
+#include "d2gs/render/activations.hpp"
 
 namespace d2gs {
 
@@ -176,7 +177,7 @@ GaussianMixture mixture_from_model(const Gaussians& model, const std::vector<std
     if (i >= model.size()) fail("mixture: Gaussian index {} is outside the model ({} Gaussians)", i, model.size());
     mix.means.emplace_back(model.means[i * 3], model.means[i * 3 + 1], model.means[i * 3 + 2]);
     mix.covariances.push_back(gaussian_covariance(model, i));
-    const double alpha = 1.0 / (1.0 + std::exp(-static_cast<double>(model.opacity_logits[i])));
+    const double alpha = sigmoid(static_cast<double>(model.opacity_logits[i]));
     mix.weights.push_back(alpha);
     total += alpha;
   }

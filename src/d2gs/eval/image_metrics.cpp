@@ -3,7 +3,7 @@
 #include <cmath>
 #include <limits>
 
-#include "d2gs/train/ssim.hpp"
+#include "d2gs/eval/ssim.hpp"
 
 namespace d2gs {
 

@@ -7,8 +7,8 @@
 
 #include "d2gs/core/image.hpp"
 #include "d2gs/geometry/stereo.hpp"
+#include "d2gs/model/point_cloud.hpp"
 #include "d2gs/scene/camera.hpp"
-#include "d2gs/scene/point_cloud.hpp"
 
 namespace d2gs {
 

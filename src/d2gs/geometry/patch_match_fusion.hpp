@@ -9,8 +9,8 @@
 
 #include "d2gs/core/image.hpp"
 #include "d2gs/geometry/patch_match.hpp"
+#include "d2gs/model/point_cloud.hpp"
 #include "d2gs/scene/camera.hpp"
-#include "d2gs/scene/point_cloud.hpp"
 
 namespace d2gs {
 

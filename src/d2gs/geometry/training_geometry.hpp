@@ -28,7 +28,7 @@
 #include "d2gs/geometry/patch_match_fusion.hpp"
 #include "d2gs/geometry/stereo.hpp"
 #include "d2gs/geometry/triangulation.hpp"
-#include "d2gs/scene/point_cloud.hpp"
+#include "d2gs/model/point_cloud.hpp"
 #include "d2gs/scene/scene.hpp"
 
 namespace d2gs {

@@ -7,7 +7,7 @@
 #include <filesystem>
 
 #include "d2gs/model/gaussians.hpp"
-#include "d2gs/scene/point_cloud.hpp"
+#include "d2gs/model/point_cloud.hpp"
 
 namespace d2gs {
 

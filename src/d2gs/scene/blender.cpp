@@ -93,12 +93,8 @@ BlenderTransforms parse_blender_transforms(std::string_view json_text, const fs:
 }
 
 Scene load_blender_scene(const fs::path& root, const SceneLoadOptions& options) {
-  Scene scene;
-  scene.root = root;
-  scene.format = SceneFormat::Blender;
-  scene.resolution = options.resolution;
-  scene.background = options.background;
-  scene.image_source = options.image_source;  // Blender has one image folder: only the filter changes
+  // Blender has one image folder: the image source changes only the filter.
+  Scene scene = empty_scene(root, SceneFormat::Blender, options);
 
   std::vector<std::string> folders;
   for (const char* split : {"train", "test"}) {

@@ -542,12 +542,7 @@ Scene load_colmap_scene(const fs::path& root, const SceneLoadOptions& options) {
   auto images = read_colmap_images(sparse);
   if (images.empty()) fail_file(images_path, "the model has no images");
 
-  Scene scene;
-  scene.root = root;
-  scene.format = SceneFormat::Colmap;
-  scene.resolution = options.resolution;
-  scene.background = options.background;
-  scene.image_source = options.image_source;
+  Scene scene = empty_scene(root, SceneFormat::Colmap, options);
 
   std::unordered_map<std::uint32_t, const ColmapCamera*> by_id;
   bool warned_radial = false;

@@ -9,7 +9,7 @@
 #include <string_view>
 #include <vector>
 
-#include "d2gs/scene/point_cloud.hpp"
+#include "d2gs/model/point_cloud.hpp"
 #include "d2gs/scene/scene.hpp"
 
 namespace d2gs {

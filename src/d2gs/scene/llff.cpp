@@ -83,12 +83,7 @@ Scene load_llff_scene(const fs::path& root, const SceneLoadOptions& options) {
   const fs::path poses_path = root / "poses_bounds.npy";
   const auto poses = parse_llff_poses(read_npy(poses_path), poses_path);
 
-  Scene scene;
-  scene.root = root;
-  scene.format = SceneFormat::Llff;
-  scene.resolution = options.resolution;
-  scene.background = options.background;
-  scene.image_source = options.image_source;
+  Scene scene = empty_scene(root, SceneFormat::Llff, options);
   const auto folder = choose_image_folder(root, options.resolution, options.image_source);
   scene.images_folder = folder.folder;
   const auto names = list_images(root / folder.folder);

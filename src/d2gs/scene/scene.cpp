@@ -97,6 +97,16 @@ void set_camera_image(Camera& camera, int resample) {
   camera.has_alpha = png_has_alpha(camera.image_path);
 }
 
+Scene empty_scene(const fs::path& root, SceneFormat format, const SceneLoadOptions& options) {
+  Scene scene;
+  scene.root = root;
+  scene.format = format;
+  scene.resolution = options.resolution;
+  scene.background = options.background;
+  scene.image_source = options.image_source;
+  return scene;
+}
+
 Scene load_scene(const fs::path& root, const SceneLoadOptions& options) {
   check_resolution(options.resolution);
   for (int c = 0; c < 3; ++c)

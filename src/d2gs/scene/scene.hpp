@@ -9,8 +9,8 @@
 #include <glm/glm.hpp>
 
 #include "d2gs/core/image.hpp"
+#include "d2gs/model/point_cloud.hpp"
 #include "d2gs/scene/camera.hpp"
-#include "d2gs/scene/point_cloud.hpp"
 
 namespace d2gs {
 
@@ -51,6 +51,8 @@ struct Scene {
 // Detects the format of `root` and loads it: sparse/0/images.{bin,txt} -> COLMAP, else
 // poses_bounds.npy -> LLFF, else transforms_train.json -> Blender (docs/formats.md, "Scenes"). Throws d2gs::Error naming the file and the problem.
 Scene load_scene(const std::filesystem::path& root, const SceneLoadOptions& options = {});
+// A scene without cameras: `root`, `format` and the load options recorded (each format loader starts from it).
+Scene empty_scene(const std::filesystem::path& root, SceneFormat format, const SceneLoadOptions& options);
 // Decodes camera `index`'s image at the scene's resolution: RGB float [0,1], alpha composited on the
 // scene's background, resampled when needed (area, or PIL's bicubic for ImageSource::Largest); throws if
 // its size differs from the camera's.

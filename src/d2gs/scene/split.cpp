@@ -116,4 +116,12 @@ Split make_split(const Scene& scene, const SplitOptions& options) {
   return split;
 }
 
+SceneAndSplit load_scene_and_split(const std::filesystem::path& root, const SceneLoadOptions& load,
+                                   const SplitOptions& split) {
+  SceneAndSplit out;
+  out.scene = load_scene(root, load);
+  out.split = make_split(out.scene, split);
+  return out;
+}
+
 }  // namespace d2gs

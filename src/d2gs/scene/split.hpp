@@ -1,5 +1,6 @@
 #pragma once
 // Sparse-view train/test split (method.md §3).
+#include <filesystem>
 #include <vector>
 
 #include "d2gs/scene/scene.hpp"
@@ -25,5 +26,14 @@ std::vector<int> linspace_pick(const std::vector<int>& all_train, int n);
 // COLMAP/LLFF: test = every 8th image by name; Blender: the dataset's test set, and for 8 views the
 // DietNeRF selection [26, 86, 2, 55, 75, 93, 16, 73]. Throws d2gs::Error on impossible requests.
 Split make_split(const Scene& scene, const SplitOptions& options);
+
+// A scene (metadata only) and its split: what the commands that work on training or test views start from.
+struct SceneAndSplit {
+  Scene scene;
+  Split split;
+};
+// load_scene(root, load), then make_split of it.
+SceneAndSplit load_scene_and_split(const std::filesystem::path& root, const SceneLoadOptions& load,
+                                   const SplitOptions& split);
 
 }  // namespace d2gs

@@ -47,6 +47,14 @@ SceneLoadOptions scene_load_options(const TrainConfig& c) {
   return lo;
 }
 
+SplitOptions split_options(const TrainConfig& c) {
+  SplitOptions so;
+  so.n_views = c.n_views;
+  so.train_views = c.train_views;
+  so.test_views = c.test_views;
+  return so;
+}
+
 std::filesystem::path recorded_source(const std::filesystem::path& model_dir, const std::string& source) {
   const std::filesystem::path p = source;
   if (p.empty() || p.is_absolute()) return p;

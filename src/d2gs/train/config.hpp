@@ -15,6 +15,7 @@
 #include "d2gs/train/dropout.hpp"
 #include "d2gs/train/losses.hpp"
 #include "d2gs/scene/scene.hpp"
+#include "d2gs/scene/split.hpp"
 
 namespace d2gs {
 
@@ -90,8 +91,9 @@ struct TrainConfig {
 // --config file or an experiment may hold them, and they are not read back as options.
 inline constexpr const char* kRecordedKeys[] = {"init_is_oracle", "scene_extent", "split", "images_folder"};
 
-// How the run's scene is loaded (resolution, background, image source).
+// How the run's scene is loaded (resolution, background, image source) and split into views.
 SceneLoadOptions scene_load_options(const TrainConfig& c);
+SplitOptions split_options(const TrainConfig& c);
 
 // Every option under its name (options.hpp).
 void to_json(nlohmann::json& j, const TrainConfig& c);

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "d2gs/core/error.hpp"
+#include "d2gs/core/percentile.hpp"
 #include "d2gs/core/random.hpp"
 #include "d2gs/geometry/knn.hpp"
 #include "d2gs/render/activations.hpp"
@@ -31,18 +32,6 @@ Gaussians gaussians_from_point_cloud(const PointCloud& cloud, int sh_degree, flo
   }
   return g;
 }
-
-namespace {
-
-double percentile(std::vector<double>& v, double q) {  // linear interpolation, as numpy.percentile
-  std::sort(v.begin(), v.end());
-  const double pos = q / 100.0 * static_cast<double>(v.size() - 1);
-  const auto lo = static_cast<std::size_t>(pos);
-  const std::size_t hi = std::min(lo + 1, v.size() - 1);
-  return v[lo] + (pos - static_cast<double>(lo)) * (v[hi] - v[lo]);
-}
-
-}  // namespace
 
 RandomInitRange random_init_depth_range(const Scene& scene, const std::vector<int>& train_views, float extent) {
   RandomInitRange r{0.5 * extent, 50.0 * extent, false};

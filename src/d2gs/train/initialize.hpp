@@ -6,7 +6,7 @@
 #include <vector>
 
 #include "d2gs/model/gaussians.hpp"
-#include "d2gs/scene/point_cloud.hpp"
+#include "d2gs/model/point_cloud.hpp"
 #include "d2gs/scene/scene.hpp"
 
 namespace d2gs {

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "d2gs/core/error.hpp"
+#include "d2gs/core/percentile.hpp"
 
 namespace d2gs {
 namespace {
@@ -22,16 +23,6 @@ double l1_loss(const float* a, const float* b, std::size_t count, float* grad, f
     if (grad) grad[i] += g * sign(d);
   }
   return sum / static_cast<double>(count);
-}
-
-double percentile(std::vector<float> values, double q) {
-  if (values.empty()) fail("percentile of an empty set");
-  std::sort(values.begin(), values.end());
-  const double pos = std::clamp(q, 0.0, 100.0) / 100.0 * static_cast<double>(values.size() - 1);
-  const auto lo = static_cast<std::size_t>(std::floor(pos));
-  const auto hi = std::min(lo + 1, values.size() - 1);
-  const double frac = pos - static_cast<double>(lo);
-  return static_cast<double>(values[lo]) + frac * (static_cast<double>(values[hi]) - static_cast<double>(values[lo]));
 }
 
 std::vector<std::uint8_t> dafe_mask(const std::vector<float>& prior, PriorKind kind, DafeMaskRule rule, double tau,

@@ -40,7 +40,4 @@ std::vector<std::uint8_t> dafe_mask(const std::vector<float>& prior, PriorKind k
 double dafe_loss(const float* a, const float* b, int width, int height, int channels,
                  const std::vector<std::uint8_t>& mask, DafeLossForm form, float* grad = nullptr, float scale = 1.0f);
 
-// NumPy-compatible percentile (linear interpolation between closest ranks) of the given values.
-double percentile(std::vector<float> values, double q);
-
 }  // namespace d2gs

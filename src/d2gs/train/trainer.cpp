@@ -1,7 +1,5 @@
 #include "d2gs/train/trainer.hpp"
 
-#include <unistd.h>
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -17,16 +15,18 @@
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/file_lock.hpp"
 #include "d2gs/core/random.hpp"
+#include "d2gs/eval/ssim.hpp"
+#include "d2gs/geometry/training_geometry.hpp"
 #include "d2gs/model/ply.hpp"
 #include "d2gs/render/activations.hpp"
 #include "d2gs/render/rasterizer.hpp"
 #include "d2gs/train/checkpoint.hpp"
 #include "d2gs/train/densify.hpp"
-#include "d2gs/geometry/training_geometry.hpp"
 #include "d2gs/train/initialize.hpp"
 #include "d2gs/train/losses.hpp"
 #include "d2gs/train/methods/method.hpp"
-#include "d2gs/train/ssim.hpp"
+#include "d2gs/train/outputs.hpp"
+#include "d2gs/train/progress.hpp"
 
 namespace d2gs {
 namespace fs = std::filesystem;
@@ -42,13 +42,6 @@ float compute_scene_extent(const Scene& scene, const std::vector<int>& views) {
   for (int v : views) radius = std::max(radius, glm::length(scene.cameras[static_cast<std::size_t>(v)].center_world() - mean));
   if (!(radius > 0.0)) radius = 1.0;  // a single view: the original falls back likewise to a unit radius
   return static_cast<float>(1.1 * radius);
-}
-
-std::string format_duration(double seconds) {
-  if (!std::isfinite(seconds) || seconds < 0) return "--:--";
-  const long s = std::lround(seconds);
-  if (s >= 3600) return fmt::format("{}:{:02}:{:02}", s / 3600, (s / 60) % 60, s % 60);
-  return fmt::format("{:02}:{:02}", s / 60, s % 60);
 }
 
 }  // namespace
@@ -174,24 +167,6 @@ void restore(Trainer::State& s, TrainingState&& t) {
   s.method->restore(std::move(t.method));
 }
 
-void write_cameras_json(const Trainer::State& s) {
-  nlohmann::json cams = nlohmann::json::array();
-  std::vector<int> all = s.split.train;
-  all.insert(all.end(), s.split.test.begin(), s.split.test.end());
-  int id = 0;
-  for (int v : all) {
-    const Camera& c = s.scene.cameras[static_cast<std::size_t>(v)];
-    const glm::dmat3 R = c.R_cam_to_world();
-    const glm::dvec3 pos = c.center_world();
-    nlohmann::json rot = nlohmann::json::array();
-    for (int r = 0; r < 3; ++r) rot.push_back({R[0][r], R[1][r], R[2][r]});
-    cams.push_back({{"id", id++}, {"img_name", fs::path(c.image_name).stem().string()}, {"width", c.width},
-                    {"height", c.height}, {"position", {pos.x, pos.y, pos.z}}, {"rotation", rot}, {"fy", c.fy},
-                    {"fx", c.fx}, {"global_index", v}});
-  }
-  write_file_atomic(s.out() / "cameras.json", cams.dump(1));
-}
-
 }  // namespace
 
 Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make_unique<State>()) {
@@ -203,12 +178,11 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
   std::error_code ec;
   if (fs::exists(s.cfg.model_dir, ec) && !fs::is_directory(s.cfg.model_dir, ec))
     fail_file(s.cfg.model_dir, "exists and is not a folder");
-  s.scene = load_scene(s.cfg.source, scene_load_options(s.cfg));
-  SplitOptions so;
-  so.n_views = s.cfg.n_views;
-  so.train_views = s.cfg.train_views;
-  so.test_views = s.cfg.test_views;
-  s.split = make_split(s.scene, so);
+  {
+    SceneAndSplit loaded = load_scene_and_split(s.cfg.source, scene_load_options(s.cfg), split_options(s.cfg));
+    s.scene = std::move(loaded.scene);
+    s.split = std::move(loaded.split);
+  }
   if (s.split.train.empty()) fail("{}: no training views", s.cfg.source);
   // The training-view geometry (init dense/sparse, D²GS's DAFE prior "stereo"): SCENE/{N}_views written
   // by `d2gs init` when it matches, else MODEL/init (built there once, reused on --resume).
@@ -290,14 +264,8 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
   } else {
     write_point_cloud_ply(s.out() / "input.ply", init);
   }
-  nlohmann::json cfg_json;
-  to_json(cfg_json, s.cfg);
-  cfg_json["init_is_oracle"] = s.oracle_init;
-  cfg_json["scene_extent"] = s.extent;
-  cfg_json["split"] = {{"train", s.split.train}, {"test", s.split.test}};
-  cfg_json["images_folder"] = s.scene.images_folder;
-  write_file_atomic(s.out() / "config.json", cfg_json.dump(2));
-  write_cameras_json(s);
+  write_run_config(s.out(), s.cfg, s.scene, s.split, s.extent, s.oracle_init);
+  write_cameras_json(s.out(), s.scene, s.split);
   s.log.open(s.out() / "train_log.jsonl", s.iteration > 0 ? std::ios::app : std::ios::trunc);
   if (!s.log) fail_file(s.out() / "train_log.jsonl", "cannot open for writing");
   s.started = Clock::now();
@@ -461,40 +429,17 @@ void Trainer::run() {
   auto& s = *s_;
   const auto& cfg = s.cfg;
   const std::set<int> checkpoints(cfg.checkpoint_iterations.begin(), cfg.checkpoint_iterations.end());
-  const bool tty = ::isatty(STDERR_FILENO) != 0;
   const int start = s.iteration;
-  const auto t0 = Clock::now();
-  auto last_print = t0;
-  int last_decile = -1;
-  double ema_loss = 0.0;
+  TrainingProgress progress(cfg.method, start, cfg.iterations, cfg.quiet);
   s.outputs = true;  // saves and test metrics, from step()
   while (s.iteration < cfg.iterations) {
     const IterationRecord rec = step();
     const int t = rec.iteration;
-    ema_loss = t == start + 1 ? rec.loss : 0.6 * rec.loss + 0.4 * ema_loss;
     if (checkpoints.count(t)) save_checkpoint(s.out() / fmt::format("chkpnt{}.bin", t));
-    if (!cfg.quiet) {
-      const auto now = Clock::now();
-      const double secs = std::chrono::duration<double>(now - t0).count();
-      const double rate = (t - start) / std::max(secs, 1e-9);
-      const double eta = (cfg.iterations - t) / std::max(rate, 1e-9);
-      const std::string line = fmt::format("[train {}] it {}/{}  {:.1f} it/s  loss {:.4f}  #G {}  elapsed {}  ETA {}",
-                                           cfg.method, t, cfg.iterations, rate, ema_loss, rec.gaussians,
-                                           format_duration(s.elapsed()), format_duration(eta));
-      if (tty && (std::chrono::duration<double>(now - last_print).count() > 0.25 || t == cfg.iterations)) {
-        std::fprintf(stderr, "\r%s\033[K", line.c_str());
-        last_print = now;
-      } else if (!tty) {
-        const int decile = static_cast<int>(10.0 * t / cfg.iterations);
-        if (decile != last_decile) {
-          std::fprintf(stderr, "%s\n", line.c_str());
-          last_decile = decile;
-        }
-      }
-    }
+    progress.update(t, rec.loss, rec.gaussians, s.elapsed());
   }
   s.outputs = false;
-  if (!cfg.quiet && ::isatty(STDERR_FILENO)) std::fprintf(stderr, "\n");
+  progress.finish();
   // Resumed from the checkpoint of the run's last iteration (check_resume allows no other at that
   // iteration): nothing to train, and the model is the final one, since the last iteration changes nothing
   // after its save. Save it where that save is missing, so that results.json names a model that exists.
@@ -508,16 +453,9 @@ void Trainer::run() {
   // Final evaluation on the held-out views, in the original render.py layout.
   if (!s.split.test.empty()) {
     const auto e = evaluate_test_views(s.out() / "test" / fmt::format("ours_{}", s.iteration));
-    nlohmann::json j;
-    to_json(j, e);
-    j["method"] = cfg.method;
-    j["iteration"] = s.iteration;
-    j["gaussians"] = s.model.size();
-    j["train_seconds"] = s.elapsed();
-    j["init_is_oracle"] = s.oracle_init;
-    j["image_source"] = to_string(s.scene.image_source);
-    j["images_folder"] = s.scene.images_folder;
-    write_file_atomic(s.out() / "results.json", j.dump(2));
+    write_results_json(s.out(), e, s.scene,
+                       {.method = cfg.method, .iteration = s.iteration, .gaussians = s.model.size(),
+                        .init_is_oracle = s.oracle_init, .train_seconds = s.elapsed()});
     if (!cfg.quiet) std::fprintf(stdout, "%s", format_table(e).c_str());
   }
 }

@@ -10,16 +10,25 @@
 #include "d2gs/render/raster_math.hpp"
 
 namespace d2gs::render::cpu {
+namespace {
+
+// Sizes a render's image buffers (RGB, alpha, depth: Outputs<T> or RenderOutputs) to the camera.
+template <typename Images>
+void size_images(Images& out, int width, int height) {
+  const std::size_t pixels = static_cast<std::size_t>(std::max(width, 0)) * std::max(height, 0);
+  out.width = width;
+  out.height = height;
+  out.rgb.resize(pixels * 3);
+  out.alpha.resize(pixels);
+  out.depth.resize(pixels);
+}
+
+}  // namespace
 
 template <typename T>
 const Outputs<T>& CpuRasterizerCore<T>::forward(const ModelView<T>& model, const T* opacity_multiplier,
                                                 const CameraParams<T>& camera, const RenderOptions& options) {
-  const std::size_t pixels = static_cast<std::size_t>(std::max(camera.width, 0)) * std::max(camera.height, 0);
-  outputs_.width = camera.width;
-  outputs_.height = camera.height;
-  outputs_.rgb.resize(pixels * 3);
-  outputs_.alpha.resize(pixels);
-  outputs_.depth.resize(pixels);
+  size_images(outputs_, camera.width, camera.height);
   forward_into(model, opacity_multiplier, camera, options, outputs_.rgb.data(), outputs_.alpha.data(),
                outputs_.depth.data());
   return outputs_;
@@ -76,12 +85,7 @@ public:
                                const RenderOptions& options) override {
     model.validate();
     const ModelView<float> view = model_view(model);
-    const std::size_t pixels = static_cast<std::size_t>(std::max(camera.width, 0)) * std::max(camera.height, 0);
-    out_.width = camera.width;
-    out_.height = camera.height;
-    out_.rgb.resize(pixels * 3);
-    out_.alpha.resize(pixels);
-    out_.depth.resize(pixels);
+    size_images(out_, camera.width, camera.height);
     core_.forward_into(view, opacity_multiplier, camera, options, out_.rgb.data(), out_.alpha.data(),
                        out_.depth.data());
     const auto& radii = core_.projected().radii;

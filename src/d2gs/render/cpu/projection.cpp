@@ -1,15 +1,9 @@
 #include "d2gs/render/cpu/projection.hpp"
 
+#include "d2gs/render/activations.hpp"
 #include "d2gs/render/raster_math.hpp"
 
 namespace d2gs::render::cpu {
-
-namespace {
-template <typename T>
-T sigmoid_t(T x) {
-  return T(1) / (T(1) + hd_exp(-x));
-}
-}  // namespace
 
 template <typename T>
 void project_forward(const ModelView<T>& model, const T* opacity_multiplier, const CameraParams<T>& cam,
@@ -21,7 +15,7 @@ void project_forward(const ModelView<T>& model, const T* opacity_multiplier, con
 #pragma omp parallel for schedule(static)
   for (std::ptrdiff_t i = 0; i < n; ++i) {
     const T m = opacity_multiplier ? opacity_multiplier[i] : T(1);
-    out.opacity[i] = sigmoid_t(model.opacity_logits[i]) * m;
+    out.opacity[i] = sigmoid(model.opacity_logits[i]) * m;
     ProjectionState<T> st;
     int radius = 0;
     T* mean2d = &out.mean2d[i * 2];
@@ -56,7 +50,7 @@ void project_backward(const ModelView<T>& model, const T* opacity_multiplier, co
     out.opacity_logits[i] = T(0);
     if (fwd.radii[i] <= 0) continue;
     const T m = opacity_multiplier ? opacity_multiplier[i] : T(1);
-    const T s = sigmoid_t(model.opacity_logits[i]);
+    const T s = sigmoid(model.opacity_logits[i]);
     out.opacity_logits[i] = grads.opacity[i] * m * s * (T(1) - s);
     ProjectionState<T> st;
     T mean2d[2], conic[3], depth;

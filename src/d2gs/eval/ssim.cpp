@@ -1,4 +1,4 @@
-#include "d2gs/train/ssim.hpp"
+#include "d2gs/eval/ssim.hpp"
 
 #include <array>
 #include <cmath>

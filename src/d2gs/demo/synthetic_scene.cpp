@@ -1,4 +1,4 @@
-#include "d2gs/scene/synthetic_scene.hpp"
+#include "d2gs/demo/synthetic_scene.hpp"
 
 #include <omp.h>
 
@@ -17,6 +17,7 @@
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/npy.hpp"
+#include "d2gs/core/random.hpp"
 #include "d2gs/model/ply.hpp"
 
 namespace d2gs {
@@ -34,24 +35,7 @@ constexpr double kDiffuse = 0.7;
 constexpr double kRayEpsilon = 1e-6;
 
 // ---- deterministic randomness ----------------------------------------------------------------------
-
-std::uint64_t splitmix64(std::uint64_t& state) {
-  std::uint64_t z = (state += 0x9E3779B97F4A7C15ull);
-  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-  return z ^ (z >> 31);
-}
-
-class Rng {
-public:
-  explicit Rng(std::uint64_t seed) : state_(seed) {}
-  double uniform() { return static_cast<double>(splitmix64(state_) >> 11) * 0x1.0p-53; }  // [0, 1)
-  double uniform(double lo, double hi) { return lo + (hi - lo) * uniform(); }
-  std::uint32_t bits32() { return static_cast<std::uint32_t>(splitmix64(state_) >> 32); }
-
-private:
-  std::uint64_t state_;
-};
+// The layout draws from one SplitMix64 stream (core/random.hpp); textures hash lattice points.
 
 std::uint32_t hash3(std::int64_t x, std::int64_t y, std::int64_t z, std::uint32_t seed) {
   std::uint64_t h = seed * 0x9E3779B97F4A7C15ull;
@@ -301,7 +285,7 @@ void validate(const SyntheticSceneOptions& o) {
 
 SyntheticScene::SyntheticScene(const SyntheticSceneOptions& options) : options_(options) {
   validate(options_);
-  Rng rng(options_.seed ^ 0xD25C5EED5EEDull);
+  SplitMix64 rng(options_.seed ^ 0xD25C5EED5EEDull);
   const auto palette = [&](double hue, double saturation = 0.65) {
     std::array<vec3, 3> c;
     for (int i = 0; i < 3; ++i)
@@ -310,7 +294,7 @@ SyntheticScene::SyntheticScene(const SyntheticSceneOptions& options) : options_(
     return c;
   };
   const auto add = [&](Object o) {
-    o.texture_seed = rng.bits32();
+    o.texture_seed = static_cast<std::uint32_t>(rng.next_u64() >> 32);
     o.world_to_local = glm::transpose(o.local_to_world);
     o.bound_radius = o.shape == Shape::Sphere ? o.radius : o.shape == Shape::Box ? glm::length(o.half) : 0.0;
     objects_.push_back(std::move(o));

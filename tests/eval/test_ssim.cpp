@@ -3,7 +3,7 @@
 #include <random>
 
 #include "d2gs/core/npy.hpp"
-#include "d2gs/train/ssim.hpp"
+#include "d2gs/eval/ssim.hpp"
 #include "test_paths.hpp"
 
 namespace d2gs {

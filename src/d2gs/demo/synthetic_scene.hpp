@@ -26,8 +26,8 @@
 #include <nlohmann/json.hpp>
 
 #include "d2gs/core/image.hpp"
+#include "d2gs/model/point_cloud.hpp"
 #include "d2gs/scene/camera.hpp"
-#include "d2gs/scene/point_cloud.hpp"
 
 namespace d2gs {
 

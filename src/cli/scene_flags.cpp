@@ -1,0 +1,39 @@
+#include "cli/scene_flags.hpp"
+
+namespace d2gs::cli {
+
+SceneLoadOptions SceneFlags::load_options() const {
+  SceneLoadOptions load;
+  load.resolution = resolution;
+  load.background = glm::vec3(white_background ? 1.0f : 0.0f);
+  return load;
+}
+
+SplitOptions SceneFlags::split_options() const {
+  SplitOptions split;
+  split.n_views = n_views;
+  split.train_views = train_views;
+  split.test_views = test_views;
+  return split;
+}
+
+CLI::Option* add_resolution_flag(CLI::App& cmd, int& resolution) {
+  return cmd.add_option("-r,--resolution", resolution, "Image resolution 1/R: 1, 2, 4 or 8")->capture_default_str();
+}
+
+void add_scene_flags(CLI::App& cmd, SceneFlags& flags, SplitFlags split) {
+  cmd.add_option("-s,--source", flags.source, "Scene folder (COLMAP sparse/0, LLFF poses_bounds.npy or Blender)")
+      ->required();
+  add_resolution_flag(cmd, flags.resolution);
+  cmd.add_option("--n-views", flags.n_views, "Training views of the sparse-view split (0 = every non-test view)")
+      ->capture_default_str();
+  if (split == SplitFlags::All) {
+    cmd.add_option("--train-views", flags.train_views, "Explicit training views (global indices, e.g. 1,10,19)")
+        ->delimiter(',');
+    cmd.add_option("--test-views", flags.test_views, "Explicit test views (global indices)")->delimiter(',');
+  }
+  cmd.add_flag("--white-background", flags.white_background,
+               "White background: RGBA images composited on white, renders on white (default black)");
+}
+
+}  // namespace d2gs::cli
