@@ -41,9 +41,9 @@ Run add_init_command(CLI::App& app) {
       "Writes DIR/sparse/points3D.ply, DIR/dense/fused.ply, DIR/depth/NAME.npy (float32 H×W camera-space depth,\n"
       "0 = invalid; usable as `d2gs train --dafe-prior DIR/depth --dafe-prior-kind depth`), DIR/depth/NAME_valid.png\n"
       "and DIR/init.json, with DIR = SCENE/{N}_views unless -o is given. Only the training views are read.\n"
-      "--dense-method patchmatch: PatchMatch multi-view stereo (COLMAP-like, on the CPU) and fusion of the depth\n"
-      "and normal maps, at the highest resolution of the scene folder (depth maps at that size; fused.ply with\n"
-      "normals); SGBM (default) runs at the training resolution.\n"
+      "PatchMatch (default): multi-view stereo (COLMAP-like, on the CPU) and fusion of the depth and normal maps,\n"
+      "at the highest resolution of the scene folder (depth maps at that size; fused.ply with normals);\n"
+      "--dense-method sgbm runs at the training resolution.\n"
       "Example: d2gs init -s ../shared/data/nerf_llff_data/fern --n-views 3 -r 8 -o out/fern_init");
   auto o = std::make_shared<InitOptions>();
   add_scene_flags(*cmd, o->scene, SplitFlags::All);
@@ -103,6 +103,10 @@ Run add_init_command(CLI::App& app) {
                   "filter_min_triangulation_angle; 0: any angle, as COLMAP before its fix of 2026-02 effectively "
                   "filtered)")
       ->capture_default_str();
+  cmd->add_option("--pm-filter-geom-px", pm.filter_geom_max_px,
+                  "PatchMatch: largest forward-backward reprojection error (pixels) of a source that confirms a "
+                  "depth (COLMAP's filter_geom_consistency_max_cost)")
+      ->capture_default_str();
   cmd->add_option("--fusion-min-pixels", o->geometry.patch_match_fusion.min_pixels,
                   "PatchMatch fusion: pixels (across views) a fused point needs")
       ->capture_default_str();
@@ -117,10 +121,6 @@ Run add_init_command(CLI::App& app) {
   cmd->add_option("--fusion-max-reprojection-px", o->geometry.patch_match_fusion.max_reprojection_px,
                   "PatchMatch fusion: largest reprojection error (pixels) of the point into a joining pixel "
                   "(COLMAP's max_reproj_error)")
-      ->capture_default_str();
-  cmd->add_option("--pm-filter-geom-px", pm.filter_geom_max_px,
-                  "PatchMatch: largest forward-backward reprojection error (pixels) of a source that confirms a "
-                  "depth (COLMAP's filter_geom_consistency_max_cost)")
       ->capture_default_str();
   cmd->add_option("--compare-cloud", o->compare_cloud,
                   "Also measure the dense cloud against this PLY (e.g. another pipeline's fused cloud): accuracy "
