@@ -31,7 +31,8 @@ fs::path write_config(const fs::path& dir, const nlohmann::json& methods, const 
       {"scenes", {{{"name", "fern"}, {"source", "nerf_llff_data/fern"}, {"scene_preset", "llff/fern"}}}},
       {"views", {3}},
       {"seeds", seeds},
-      {"train", {{"resolution", 8}, {"iterations", iterations}, {"log_every", 1}}},
+      // SGBM's initial points: seconds, where the default PatchMatch takes a minute (tests/geometry test it).
+      {"train", {{"resolution", 8}, {"iterations", iterations}, {"log_every", 1}, {"init_dense_method", "sgbm"}}},
       {"methods", methods},
       {"checkpoint_every", checkpoint_every},
       {"keep_checkpoints", keep_checkpoints},

@@ -175,7 +175,7 @@ TEST(Resume, FromTheRunsOwnConfigJson) {
   const auto dir = test::scratch_dir();
   const fs::path run = dir / "run";
   const auto first = test::run_cli(fmt::format("-q train -s '{}' -m '{}' -r 8 --n-views 3 --method d2gs --dafe-prior stereo "
-                                               "--init random --random-points 300 --iterations 4 --checkpoint-iterations 2 "
+                                               "--init-dense-method sgbm --init random --random-points 300 --iterations 4 --checkpoint-iterations 2 "
                                                "--quiet", fern(), run.string()));
   ASSERT_EQ(first.exit_code, 0) << first.output;
   const auto saved = nlohmann::json::parse(read_file(run / "config.json"));
