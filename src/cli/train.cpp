@@ -52,7 +52,7 @@ Run add_train_command(CLI::App& app) {
         fmt::format("{} ({}default {})", o.help, o.range.empty() ? "" : o.range + "; ", o.default_text());
     if (o.kind == OptionKind::Flag) {
       b.cli = cmd->add_flag(names + ",!--no-" + o.flag().substr(2), b.on, description);
-    } else if (o.kind == OptionKind::IntegerList) {
+    } else if (o.kind == OptionKind::IntegerList || o.kind == OptionKind::NameList) {
       b.cli = cmd->add_option(names, b.words, description)->delimiter(',')->type_name(o.type_name);
     } else {
       b.cli = cmd->add_option(names, b.word, description)->type_name(o.type_name);
@@ -66,7 +66,7 @@ Run add_train_command(CLI::App& app) {
       if (b.cli->count() == 0) continue;
       const TrainOption& o = *b.option;
       given[o.name] = o.parse(o.kind == OptionKind::Flag          ? std::vector<std::string>{b.on ? "true" : "false"}
-                              : o.kind == OptionKind::IntegerList ? b.words
+                              : o.kind == OptionKind::IntegerList || o.kind == OptionKind::NameList ? b.words
                                                                   : std::vector<std::string>{b.word});
     }
     TrainConfig c;

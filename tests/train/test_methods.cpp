@@ -185,5 +185,124 @@ TEST(Methods, D2gsChecksItsCheckpointState) {
   EXPECT_EQ(test::error_of([&] { m->check_state(s, run); }), "it holds state 'other', which --method d2gs does not keep");
 }
 
+// ---- regularisers (--regularisers): components stacked on any method ----
+
+TEST(Regularisers, RegistryAndNames) {
+  ASSERT_EQ(training_regularisers().size(), 2u);
+  EXPECT_STREQ(training_regularisers()[0].name, "opacity-noise");
+  EXPECT_STREQ(training_regularisers()[1].name, "opacity-decay");
+  TrainConfig c;
+  c.method = "dropgaussian";
+  c.regularisers = {"opacity-decay", "opacity-noise"};
+  EXPECT_STREQ(make_training_method(c)->name(), "dropgaussian");  // the run's method, whatever is stacked on it
+  c.regularisers = {"weight-decay"};
+  EXPECT_EQ(test::error_of([&] { (void)make_training_method(c); }), "unknown regulariser 'weight-decay'");
+  c.regularisers = {"opacity-noise", "opacity-noise"};
+  EXPECT_EQ(test::error_of([&] { (void)make_training_method(c); }), "regulariser 'opacity-noise' is named twice");
+}
+
+TEST(Regularisers, OpacityNoiseIsClippedGaussianCappedAtOneAndStateless) {
+  Fixture f;
+  f.model = random_model(20000);
+  for (std::size_t i = 0; i < f.model.size(); ++i) f.model.opacity_logits[i] = 3.0f * static_cast<float>(i % 7) - 9.0f;
+  TrainConfig c;
+  c.regularisers = {"opacity-noise"};
+  c.opacity_noise_sigma = 0.5;
+  auto m = make_training_method(c);
+  const Rng::State before = f.rng.state();
+  const OpacityMultiplier mult = m->opacity_multiplier(f.step(7));
+  EXPECT_EQ(std::memcmp(f.rng.state().words, before.words, sizeof before.words), 0);  // the dropout stream untouched
+  ASSERT_NE(mult.values, nullptr);
+  EXPECT_EQ(mult.drop_fraction, 0.0);
+  const std::vector<float> values(mult.values, mult.values + f.model.size());
+  std::size_t at_bound = 0, uncapped = 0;
+  double sum = 0.0;
+  for (std::size_t i = 0; i < values.size(); ++i) {
+    const double o = 1.0 / (1.0 + std::exp(-static_cast<double>(f.model.opacity_logits[i])));
+    const double m_i = values[i];
+    EXPECT_GE(m_i, 0.5 - 1e-6);
+    EXPECT_LE(m_i, 1.5 + 1e-6);
+    EXPECT_LE(o * m_i, 1.0 + 1e-6) << i;  // o·(1 + ε) capped at 1
+    if (o < 0.6) {                        // 1 + ε ≤ 1.5 < 1/o: never capped
+      ++uncapped;
+      sum += m_i;
+      at_bound += std::abs(std::abs(m_i - 1.0) - 0.5) < 1e-6;
+    }
+  }
+  ASSERT_GT(uncapped, 10000u);
+  // ε ~ N(0, σ²) clipped to [−σ, σ]: mean 0, and P(|ε| = σ) = P(|Z| ≥ 1) = 0.3173.
+  EXPECT_NEAR(sum / static_cast<double>(uncapped), 1.0, 0.01);
+  EXPECT_NEAR(static_cast<double>(at_bound) / static_cast<double>(uncapped), 0.3173, 0.015);
+  // The noise of an iteration depends on the seed and the iteration only: no state to checkpoint.
+  auto again = make_training_method(c);
+  const OpacityMultiplier same = again->opacity_multiplier(f.step(7));
+  EXPECT_EQ(std::vector<float>(same.values, same.values + f.model.size()), values);
+  const OpacityMultiplier next = again->opacity_multiplier(f.step(8));
+  EXPECT_NE(std::vector<float>(next.values, next.values + f.model.size()), values);
+  EXPECT_TRUE(m->state().floats.empty() && m->state().bytes.empty());
+  c.seed = 1;
+  const OpacityMultiplier other_seed = make_training_method(c)->opacity_multiplier(f.step(7));
+  EXPECT_NE(std::vector<float>(other_seed.values, other_seed.values + f.model.size()), values);
+}
+
+TEST(Regularisers, OpacityDecayScalesTheOpacityAfterDensifyFrom) {
+  Fixture f;
+  TrainConfig c;
+  c.regularisers = {"opacity-decay"};
+  c.opacity_decay_factor = 0.9;
+  c.densify_from = 500;
+  auto m = make_training_method(c);
+  f.model.opacity_logits = {-200.0f, -12.0f, -3.0f, 0.0f, 0.5f, 4.0f, 16.0f};
+  const std::vector<float> before = f.model.opacity_logits;
+  m->before_update(500, f.model);  // Binocular3DGS: from the iteration after densify_from_iter
+  EXPECT_EQ(f.model.opacity_logits, before);
+  m->before_update(501, f.model);
+  for (std::size_t i = 0; i < before.size(); ++i) {
+    const double o = 1.0 / (1.0 + std::exp(-static_cast<double>(before[i])));
+    const double decayed = 1.0 / (1.0 + std::exp(-static_cast<double>(f.model.opacity_logits[i])));
+    EXPECT_TRUE(std::isfinite(f.model.opacity_logits[i])) << i;
+    EXPECT_NEAR(decayed / o, 0.9, 1e-5) << "logit " << before[i];
+  }
+  EXPECT_NEAR(f.model.opacity_logits[0], -200.0f + std::log(0.9f), 1e-4);  // underflowing opacity: l + log f
+  // Nothing else of the model changes, and the decay keeps no state.
+  EXPECT_TRUE(m->state().floats.empty() && m->state().bytes.empty());
+}
+
+TEST(Regularisers, StackMultipliesMultipliersAndNamespacesState) {
+  Fixture f;
+  TrainConfig c;
+  c.method = "d2gs";
+  c.dafe.enabled = false;
+  c.regularisers = {"opacity-noise"};
+  auto stacked = make_training_method(c);
+  stacked->start(c, MethodRun{Scene{}, Split{}, {}, {}}, [] { return CachedTrainingGeometry{}; });
+  TrainConfig alone = c;
+  alone.regularisers = {};
+  auto method = make_training_method(alone);
+  method->start(alone, MethodRun{Scene{}, Split{}, {}, {}}, [] { return CachedTrainingGeometry{}; });
+  TrainConfig noise_only;
+  noise_only.regularisers = {"opacity-noise"};
+  auto noise = make_training_method(noise_only);
+
+  Rng rng_copy = f.rng;
+  const OpacityMultiplier product = stacked->opacity_multiplier(f.step(3));
+  f.rng = rng_copy;  // the method draws what it draws alone
+  const OpacityMultiplier dd = method->opacity_multiplier(f.step(3));
+  const OpacityMultiplier eps = noise->opacity_multiplier(f.step(3));
+  ASSERT_NE(product.values, nullptr);
+  for (std::size_t i = 0; i < f.model.size(); ++i) EXPECT_EQ(product.values[i], dd.values[i] * eps.values[i]) << i;
+  EXPECT_EQ(product.drop_fraction, dd.drop_fraction);  // the noise drops nothing
+
+  // The method's state keeps its names; a regulariser's would be under "NAME/".
+  const MethodState s = stacked->state();
+  EXPECT_EQ(s.floats.count("density_cache"), 1u);
+  EXPECT_EQ(s, method->state());
+  MethodState extra = s;
+  extra.bytes["opacity-noise/rng"] = {{1, 2, 3}};
+  EXPECT_EQ(test::error_of([&] { stacked->check_state(extra, {}); }),
+            "regulariser opacity-noise: it holds state 'rng', which --method opacity-noise does not keep");
+  EXPECT_EQ(test::error_of([&] { stacked->check_state(s, {}); }), "");
+}
+
 }  // namespace
 }  // namespace d2gs

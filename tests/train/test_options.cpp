@@ -103,7 +103,11 @@ TEST(TrainCli, RangeErrorsNameFlagsThatExist) {
            {"-r 3", "option --resolution must be 1, 2, 4 or 8 (got 3)"},
            {"--iterations many", "option --iterations: 'many' is not an integer"},
            {"--dafe-mask-rule halfway", "option --dafe-mask-rule: 'halfway' is not one of percentile, threshold"},
-           {"--dafe-mask-rule threshold --dafe-tau 5", "option --dafe-tau must be a fraction in [0, 1] for the threshold rule (got 5)"}}) {
+           {"--dafe-mask-rule threshold --dafe-tau 5", "option --dafe-tau must be a fraction in [0, 1] for the threshold rule (got 5)"},
+           {"--regularisers opacity-noise,dropout", "option --regularisers: 'dropout' is not one of opacity-noise, opacity-decay"},
+           {"--regularisers opacity-decay,opacity-decay", "option --regularisers: 'opacity-decay' is named twice"},
+           {"--opacity-noise-sigma 1", "option --opacity-noise-sigma must be in [0, 1) (got 1)"},
+           {"--opacity-decay-factor 0", "option --opacity-decay-factor must be in (0, 1] (got 0)"}}) {
     const auto r = test::run_cli(fmt::format("train -s '{}' -m '{}' {}", fern, (dir / "run").string(), args));
     EXPECT_EQ(r.exit_code, 1) << args << "\n" << r.output;
     EXPECT_NE(r.output.find("d2gs: error: " + expected), std::string::npos) << args << "\n" << r.output;
@@ -113,6 +117,26 @@ TEST(TrainCli, RangeErrorsNameFlagsThatExist) {
   const auto no = test::run_cli(fmt::format("train -s '{}' -m '{}' --no-dafe --no-dd-use-layers --method d2gs "
                                             "--dafe-lambda -1", fern, (dir / "run").string()));
   EXPECT_NE(no.output.find("option --dafe-lambda must be ≥ 0 (got -1)"), std::string::npos) << no.output;
+}
+
+// --regularisers: a list of names on the command line and in config.json; "none" is the empty list.
+TEST(TrainOptions, RegularisersAreAListOfNames) {
+  const TrainOption* o = find_train_option("regularisers");
+  ASSERT_NE(o, nullptr);
+  EXPECT_EQ(o->parse({"opacity-decay", "opacity-noise"}), nlohmann::json({"opacity-decay", "opacity-noise"}));
+  EXPECT_EQ(o->parse({"none"}), nlohmann::json::array());
+  EXPECT_EQ(find_train_option("opacity_reset_at")->parse({"none"}), nlohmann::json::array());  // Binocular3DGS's
+  TrainConfig c;
+  update_from_json(c, nlohmann::json{{"regularisers", {"opacity-noise"}}, {"opacity_noise_sigma", 0.4}});
+  EXPECT_EQ(c.regularisers, std::vector<std::string>{"opacity-noise"});
+  EXPECT_DOUBLE_EQ(c.opacity_noise_sigma, 0.4);
+  nlohmann::json j;
+  to_json(j, c);
+  EXPECT_EQ(j["regularisers"], nlohmann::json({"opacity-noise"}));
+  EXPECT_EQ(test::error_of([&] { update_from_json(c, nlohmann::json{{"regularisers", "opacity-noise"}}); }),
+            "key 'regularisers' has the wrong type (expected list of names, got string)");
+  EXPECT_EQ(test::error_of([&] { update_from_json(c, nlohmann::json{{"regularisers", {"noise"}}}); }),
+            "key 'regularisers': 'noise' is not one of opacity-noise, opacity-decay");
 }
 
 // `d2gs train --help`: every option once, with its range and its default.

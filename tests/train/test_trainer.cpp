@@ -31,6 +31,10 @@ TrainConfig fern_config(const fs::path& out, const std::string& method, int iter
   c.iterations = iterations;
   c.quiet = true;
   c.seed = 1;
+  // These tests are about training, not its initial points: SGBM's geometry of the training views takes
+  // seconds where the default PatchMatch at 1008×756 takes a minute or more (tested on its own below
+  // and in tests/geometry).
+  c.init_dense_method = "sgbm";
   return c;
 }
 
@@ -97,6 +101,45 @@ TEST(Trainer, SameSeedSameModelAndResumeIsBitIdentical) {
   Trainer d(cfg_d);
   d.run();
   EXPECT_NE(d.model().means, a.model().means);
+}
+
+// Regularisers stacked on a method train, resume bit-identically (the noise has no state to lose) and
+// change the model; the decay lowers the opacities.
+TEST(Trainer, RegularisersTrainAndResumeBitIdentically) {
+  const auto dir = test::scratch_dir();
+  auto cfg = fern_config(dir / "a", "dropgaussian", 20);
+  cfg.densify_from = 5;
+  cfg.densify_every = 5;
+  cfg.opacity_reset_at = {};
+  cfg.regularisers = {"opacity-noise", "opacity-decay"};
+  cfg.opacity_decay_factor = 0.95;
+  cfg.checkpoint_iterations = {10};
+  Trainer a(cfg);
+  a.run();
+  auto cfg_b = cfg;
+  cfg_b.model_dir = (dir / "b").string();
+  cfg_b.checkpoint_iterations = {};
+  Trainer b(cfg_b, dir / "a/chkpnt10.bin");
+  b.run();
+  EXPECT_EQ(b.model().means, a.model().means);
+  EXPECT_EQ(b.model().opacity_logits, a.model().opacity_logits);
+  EXPECT_EQ(b.model().sh_dc, a.model().sh_dc);
+  const auto saved = nlohmann::json::parse(read_file(dir / "a/config.json"));
+  EXPECT_EQ(saved["regularisers"], nlohmann::json({"opacity-noise", "opacity-decay"}));
+
+  auto cfg_c = cfg_b;
+  cfg_c.model_dir = (dir / "c").string();
+  cfg_c.regularisers = {};
+  Trainer c(cfg_c);
+  c.run();
+  ASSERT_NE(c.model().means, a.model().means);
+  const auto mean_opacity = [](const Gaussians& g) {
+    double sum = 0;
+    for (float l : g.opacity_logits) sum += 1.0 / (1.0 + std::exp(-static_cast<double>(l)));
+    return sum / static_cast<double>(g.size());
+  };
+  // 0.95^14 ≈ 0.49 of decay over iterations 6–19, against what the gradients add back in 20 iterations.
+  EXPECT_LT(mean_opacity(a.model()), 0.85 * mean_opacity(c.model()));
 }
 
 TEST(Trainer, D2gsDropsNearDenseGaussiansAndRuns) {
@@ -169,6 +212,7 @@ TEST(Trainer, RandomInitLiesInTheTrainingFrustaAndIsNotAnOracle) {
 TEST(Trainer, DefaultInitIsTheTrainingViewsGeometryWithStereoDepthPriors) {
   const auto dir = test::scratch_dir();
   auto cfg = fern_config(dir / "run", "d2gs", 2);
+  cfg.init_dense_method = TrainConfig{}.init_dense_method;  // the default stereo (PatchMatch)
   ASSERT_EQ(cfg.init, "dense");  // the default
   cfg.dafe.prior = "stereo";
   Trainer t(cfg);

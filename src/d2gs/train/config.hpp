@@ -73,6 +73,16 @@ struct TrainConfig {
                            .release_density_cache = true};
   DafeOptions dafe;
 
+  // Regularisers stacked on any method (train/methods/registry.cpp: opacity-noise, opacity-decay), in
+  // this order after the method; issue 25's levers. Their options:
+  std::vector<std::string> regularisers;
+  // opacity-noise (Co-Adaptation of 3DGS, NeurIPS 2025): o·(1 + ε), ε ~ N(0, σ²) clipped to [−σ, σ],
+  // at most 1, in training renders only.
+  double opacity_noise_sigma = 0.2;
+  // opacity-decay (Binocular3DGS, NeurIPS 2024): sigmoid(logit) × factor after every iteration past
+  // --densify-from.
+  double opacity_decay_factor = 0.995;
+
   // outputs
   std::vector<int> save_iterations;        // empty = the last iteration only
   std::vector<int> checkpoint_iterations;  // optimiser state for --resume

@@ -165,8 +165,9 @@ TrainOption integer_list(const Spec& s, Field field, Bounds each) {
       if (!each.contains(v)) fail("option {}: every value must be {} (got {})", flag_name, each.phrase(), v);
   };
   o.parse = [flag_name = o.flag()](const std::vector<std::string>& words) {
-    json list = json::array();
-    for (const auto& w : words) list.push_back(number_word<int>(w, flag_name));
+    json list = json::array();  // "none": the empty list
+    for (const auto& w : words)
+      if (w != "none") list.push_back(number_word<int>(w, flag_name));
     return list;
   };
   o.default_text = [field]() {
@@ -245,6 +246,49 @@ TrainOption choice(const Spec& s, Field field, std::vector<std::pair<std::string
   return o;
 }
 
+// A list of distinct names, each one of `words` (comma-separated on the command line; "none": empty).
+template <typename Field>
+TrainOption name_list(const Spec& s, Field field, std::vector<std::string> words) {
+  const std::string list = fmt::format("{}", fmt::join(words, ", "));
+  TrainOption o = base(s, OptionKind::NameList, fmt::format("{}", fmt::join(words, ",")), "");
+  o.choices = words;
+  o.get = [field](const TrainConfig& c) { return json(field(c)); };
+  // One check for set() and for values set in code: every name known, none twice.
+  const auto check_names = [words, list](const std::vector<std::string>& names, const std::string& what) {
+    for (std::size_t i = 0; i < names.size(); ++i) {
+      if (std::find(words.begin(), words.end(), names[i]) == words.end())
+        fail("{}: '{}' is not one of {}", what, names[i], list);
+      if (std::find(names.begin(), names.begin() + static_cast<std::ptrdiff_t>(i), names[i]) != names.begin() + static_cast<std::ptrdiff_t>(i))
+        fail("{}: '{}' is named twice", what, names[i]);
+    }
+  };
+  o.set = [field, check_names, name = o.name](TrainConfig& c, const json& v) {
+    if (!v.is_array()) wrong_type(name, "list of names", v);
+    std::vector<std::string> names;
+    for (const json& e : v) {
+      if (!e.is_string()) wrong_type(name, "list of names", v);
+      names.push_back(e.get<std::string>());
+    }
+    check_names(names, fmt::format("key '{}'", name));
+    field(c) = std::move(names);
+  };
+  o.check = [field, check_names, flag_name = o.flag()](const TrainConfig& c) {
+    check_names(field(c), fmt::format("option {}", flag_name));
+  };
+  o.parse = [flag_name = o.flag(), check_names](const std::vector<std::string>& given) {
+    std::vector<std::string> names;
+    for (const auto& w : given)
+      if (w != "none") names.push_back(w);
+    check_names(names, fmt::format("option {}", flag_name));
+    return json(names);
+  };
+  o.default_text = [field]() {
+    TrainConfig d;
+    return field(d).empty() ? std::string("none") : fmt::format("{}", fmt::join(field(d), ","));
+  };
+  return o;
+}
+
 std::vector<TrainOption> declare() {
   using enum OptionRole;
   using enum OptionKind;
@@ -256,6 +300,7 @@ std::vector<TrainOption> declare() {
   const char* const dropgaussian = "DropGaussian";
   const char* const dd_drop = "D²GS: presets and DD-Drop";
   const char* const dafe = "D²GS: DAFE";
+  const char* const regularisers = "Regularisers (any method)";
   const char* const outputs = "Outputs";
   std::vector<TrainOption> t;
   // ---- scene and split ----
@@ -441,6 +486,23 @@ std::vector<TrainOption> declare() {
                      {{"paper", DafeLossForm::Paper}, {"release", DafeLossForm::Release}}));
   t.push_back(number({"dafe_lambda", dafe, "DAFE loss weight"}, [](auto& c) -> auto& { return c.dafe.lambda; },
                      at_least(0)));
+  // ---- regularisers (train/methods/registry.cpp) ----
+  {
+    std::vector<std::string> names;
+    std::string help = "Regularisers stacked on the method, comma-separated, in this order:";
+    for (const MethodInfo& r : training_regularisers()) {
+      names.emplace_back(r.name);
+      help += fmt::format("{} '{}' ({})", names.size() == 1 ? "" : ",", r.name, r.help);
+    }
+    t.push_back(name_list({"regularisers", regularisers, help.c_str()}, [](auto& c) -> auto& { return c.regularisers; },
+                          std::move(names)));
+  }
+  t.push_back(number({"opacity_noise_sigma", regularisers,
+                      "opacity-noise: σ of ε in o·(1 + ε), ε ~ N(0, σ²) clipped to [−σ, σ]"},
+                     [](auto& c) -> auto& { return c.opacity_noise_sigma; }, half_open(0, 1)));
+  t.push_back(number({"opacity_decay_factor", regularisers,
+                      "opacity-decay: each Gaussian's opacity times this after every iteration past --densify-from"},
+                     [](auto& c) -> auto& { return c.opacity_decay_factor; }, {.min = 0.0, .max = 1.0, .min_open = true}));
   // ---- outputs ----
   t.push_back(integer_list({"save_iterations", outputs, "Iterations whose model is saved (default: the last)", Output},
                            [](auto& c) -> auto& { return c.save_iterations; }, closed(1, 2147483647)));

@@ -31,7 +31,8 @@ enum class OptionKind {
   Text,         // a string
   Path,         // a string naming a file or folder, or one of `keywords`
   Choice,       // one of `choices`
-  IntegerList,  // a JSON list of integers; comma-separated on the command line
+  IntegerList,  // a JSON list of integers; comma-separated on the command line ("none": empty)
+  NameList,     // a JSON list of distinct names from `choices`; comma-separated on the command line
 };
 
 struct TrainOption {
@@ -44,7 +45,7 @@ struct TrainOption {
   OptionRole role = OptionRole::Training;
   std::string type_name;               // shown in --help: INT, FLOAT, PATH, a|b, ...
   std::string range;                   // e.g. "> 0", "[0, 1)", "1, 2, 4 or 8"; empty: any value
-  std::vector<std::string> choices;    // Choice: the names (an empty name: none chosen)
+  std::vector<std::string> choices;    // Choice: the names (an empty name: none chosen); NameList: the names
   std::vector<std::string> keywords;   // Path: the words that are not paths
 
   // The field as JSON (the value config.json records).
@@ -54,7 +55,7 @@ struct TrainOption {
   // The field's range: throws d2gs::Error "option --FLAG must be ... (got VALUE)".
   std::function<void(const TrainConfig&)> check;
   // Command-line words as the JSON value set() takes (one word; a Flag gets "true" or "false"; an
-  // IntegerList the list's words); throws d2gs::Error "option --FLAG: ..." for a word of the wrong form.
+  // IntegerList or NameList the list's words); throws d2gs::Error "option --FLAG: ..." for a word of the wrong form.
   std::function<nlohmann::json(const std::vector<std::string>&)> parse;
   // The default as --help shows it.
   std::function<std::string()> default_text;

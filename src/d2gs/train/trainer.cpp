@@ -344,6 +344,9 @@ IterationRecord Trainer::step() {
 
   if (s.outputs) save_and_test(t);
 
+  // The method's edits of the parameters (a regulariser's opacity decay), never after the last save.
+  if (t < cfg.iterations) s.method->before_update(t, s.model);
+
   // Densification (before the optimiser step, as the original).
   bool skip_step = false, skip_opacity = false;
   // Nothing changes the model after the last iteration's save, so the final evaluation scores the saved model

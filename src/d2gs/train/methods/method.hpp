@@ -6,10 +6,13 @@
 //
 // One iteration, as the trainer runs it (docs/training.md):
 //   camera → prepare() → opacity_multiplier() → render → L1 + λ·(1 − SSIM) + loss_terms() on the
-//   clamped image → backward → densification, then after_densify() → Adam step.
+//   clamped image → backward → before_update() → densification, then after_densify() → Adam step.
 //
 // A new method or regulariser is one file here (a TrainingMethod and its make_ function) and its entry
 // in registry.cpp (docs/training.md, "Adding a method"); options of its own go into TrainConfig.
+// Regularisers (--regularisers) are TrainingMethods too: stacked on the run's method (stack.cpp), their
+// opacity multipliers multiply its one, their loss terms add to its terms, and their checkpoint state
+// is kept under "NAME/" (the method's own state keeps its plain names).
 #include <cstdint>
 #include <filesystem>
 #include <functional>
@@ -110,6 +113,9 @@ public:
   virtual OpacityMultiplier opacity_multiplier(const MethodStep& /*step*/) { return {}; }
   // Extra loss terms: each adds weight · its gradient to loss.grad and is returned.
   virtual std::vector<LossTerm> loss_terms(const MethodLoss& /*loss*/) { return {}; }
+  // After the backward, before densification and the Adam step, on every iteration but the last (whose
+  // model is the one saved): edits of the parameters themselves (opacity decay). The Adam moments stay.
+  virtual void before_update(int /*iteration*/, Gaussians& /*model*/) {}
   // After densify_and_prune (report.source: where each new row came from) or any other edit of the rows.
   virtual void after_densify(const DensifyReport& /*report*/) {}
 

@@ -1,6 +1,9 @@
 // The training methods, by name: the one place a method is registered. A new method: its file in this
 // folder (a TrainingMethod and its make_ function), the make_ function declared and listed below, and
 // its source in src/d2gs/train/CMakeLists.txt.
+#include <algorithm>
+#include <utility>
+
 #include <fmt/format.h>
 
 #include "d2gs/core/error.hpp"
@@ -11,6 +14,10 @@ namespace d2gs {
 std::unique_ptr<TrainingMethod> make_gs3d(const TrainConfig& config);
 std::unique_ptr<TrainingMethod> make_dropgaussian(const TrainConfig& config);
 std::unique_ptr<TrainingMethod> make_d2gs(const TrainConfig& config);
+std::unique_ptr<TrainingMethod> make_opacity_noise(const TrainConfig& config);
+std::unique_ptr<TrainingMethod> make_opacity_decay(const TrainConfig& config);
+std::unique_ptr<TrainingMethod> stack_methods(std::unique_ptr<TrainingMethod> method,
+                                              std::vector<std::pair<std::string, std::unique_ptr<TrainingMethod>>> parts);
 
 const std::vector<MethodInfo>& training_methods() {
   static const std::vector<MethodInfo> methods = {
@@ -19,6 +26,16 @@ const std::vector<MethodInfo>& training_methods() {
       {"d2gs", "D²GS: depth-and-density dropout (DD-Drop) and distance-aware fidelity enhancement (DAFE)", &make_d2gs},
   };
   return methods;
+}
+
+const std::vector<MethodInfo>& training_regularisers() {
+  static const std::vector<MethodInfo> regularisers = {
+      {"opacity-noise", "training renders with each opacity times 1 + ε, ε ~ N(0, σ²) clipped to [−σ, σ] (Co-Adaptation of 3DGS)",
+       &make_opacity_noise},
+      {"opacity-decay", "each opacity times a factor after every iteration past --densify-from (Binocular3DGS)",
+       &make_opacity_decay},
+  };
+  return regularisers;
 }
 
 const MethodInfo* find_training_method(const std::string& name) {
@@ -41,7 +58,18 @@ void check_method_name(const std::string& name) {
 
 std::unique_ptr<TrainingMethod> make_training_method(const TrainConfig& config) {
   check_method_name(config.method);
-  return find_training_method(config.method)->make(config);
+  std::unique_ptr<TrainingMethod> method = find_training_method(config.method)->make(config);
+  if (config.regularisers.empty()) return method;
+  std::vector<std::pair<std::string, std::unique_ptr<TrainingMethod>>> parts;
+  for (const std::string& name : config.regularisers) {
+    const auto& all = training_regularisers();
+    const auto it = std::find_if(all.begin(), all.end(), [&](const MethodInfo& r) { return name == r.name; });
+    if (it == all.end()) fail("unknown regulariser '{}'", name);
+    for (const auto& [earlier, part] : parts)
+      if (earlier == name) fail("regulariser '{}' is named twice", name);
+    parts.emplace_back(name, it->make(config));
+  }
+  return stack_methods(std::move(method), std::move(parts));
 }
 
 void TrainingMethod::check_state(const MethodState& state, const RunIdentity&) const {
