@@ -114,12 +114,13 @@ void make_ref_patch(const Window& w, const Image& grey, int x, int y, RefPatch& 
 }
 
 // 1 − NCC from the weighted sums of the source samples (s = Σwv, ss = Σwv², sr = Σwv·ref).
-inline float ncc_cost(const RefPatch& p, float s, float ss, float sr) {
+inline float ncc_cost(bool textured, float mean, float ref_var, float s, float ss, float sr) {
   const float var = ss - s * s;
-  if (!p.textured || var < kMinVariance) return kMaxCost;
-  const float cov = sr - s * p.mean;
-  return std::clamp(1.0f - cov / std::sqrt(p.var * var), 0.0f, kMaxCost);
+  if (!textured || var < kMinVariance) return kMaxCost;
+  const float cov = sr - s * mean;
+  return std::clamp(1.0f - cov / std::sqrt(ref_var * var), 0.0f, kMaxCost);
 }
+inline float ncc_cost(const RefPatch& p, float s, float ss, float sr) { return ncc_cost(p.textured, p.mean, p.var, s, ss, sr); }
 
 // 1 − NCC of the reference patch at pixel (x, y) against `src` through the homography (row-major h[9]).
 float patch_cost(const RefPatch& p, const Image& src, const float* h, int x, int y) {
@@ -191,6 +192,13 @@ struct CostBatch {
   std::array<float, kMaxPairs + kLanes> cost{};
 };
 
+// Lanes of several pixels of one row (batch_costs_avx2<true>).
+struct PixelLanes {
+  alignas(32) std::array<int, kLanes> xoff{}, pix{};
+  std::array<float, kLanes> mean{}, var{};
+  alignas(32) std::array<std::array<float, kLanes>, kMaxSamples> wq{}, vq{};
+};
+
 void batch_costs_scalar(const RefPatch& p, int x, int y, CostBatch& b) {
   for (int l = 0; l < b.n; ++l) {
     const auto k = static_cast<std::size_t>(l);
@@ -221,7 +229,13 @@ __attribute__((target("avx2"))) inline void load_pairs(const float* atlas, __m25
 }
 
 // AVX2 without FMA (the target adds no "fma"): each lane's arithmetic is patch_cost's.
-__attribute__((target("avx2"))) void batch_costs_avx2(const RefPatch& p, const float* atlas, int x, int y, CostBatch& b) {
+// With `Multi`, the lanes belong to up to kLanes pixels of one row whose windows lie inside the image (the
+// same samples): lane l is pixel m->pix[l] at column x + m->xoff[l], its weights and values m->wq / m->vq
+// (sample-major, one column per pixel), its mean and variance m->mean / m->var; `p` only gives the samples'
+// offsets. Otherwise every lane is pixel (x, y) with reference patch p.
+template <bool Multi>
+__attribute__((target("avx2"))) void batch_costs_avx2(const RefPatch& p, const float* atlas, int x, int y, CostBatch& b,
+                                                      const PixelLanes* m) {
   const __m256 zero = _mm256_setzero_ps(), one = _mm256_set1_ps(1.0f), half = _mm256_set1_ps(0.5f);
   const __m256 all = _mm256_castsi256_ps(_mm256_set1_epi32(-1));
   const __m256i one_i = _mm256_set1_epi32(1);
@@ -236,9 +250,24 @@ __attribute__((target("avx2"))) void batch_costs_avx2(const RefPatch& p, const f
     const __m256 wm1 = _mm256_cvtepi32_ps(_mm256_sub_epi32(wi, one_i)), hm1 = _mm256_cvtepi32_ps(_mm256_sub_epi32(hi, one_i));
     __m256 bad = _mm256_castsi256_ps(_mm256_load_si256(reinterpret_cast<const __m256i*>(&b.invalid[G])));
     __m256 s = zero, ss = zero, sr = zero;
+    __m256i xoff = _mm256_setzero_si256(), pix = _mm256_setzero_si256();
+    if constexpr (Multi) {
+      xoff = _mm256_load_si256(reinterpret_cast<const __m256i*>(&m->xoff[G]));
+      pix = _mm256_load_si256(reinterpret_cast<const __m256i*>(&m->pix[G]));
+    }
     for (int i = 0; i < p.count; ++i) {
       const auto k = static_cast<std::size_t>(i);
-      const __m256 ux = _mm256_set1_ps(static_cast<float>(x + p.dx[k]) + 0.5f);
+      __m256 ux, weight, value;
+      if constexpr (Multi) {
+        // static_cast<float>(x_l + dx) + 0.5f of each lane: the integer sum is exact, then the same rounding.
+        ux = _mm256_add_ps(_mm256_cvtepi32_ps(_mm256_add_epi32(_mm256_set1_epi32(x + p.dx[k]), xoff)), half);
+        weight = _mm256_permutevar8x32_ps(_mm256_load_ps(m->wq[k].data()), pix);
+        value = _mm256_permutevar8x32_ps(_mm256_load_ps(m->vq[k].data()), pix);
+      } else {
+        ux = _mm256_set1_ps(static_cast<float>(x + p.dx[k]) + 0.5f);
+        weight = _mm256_set1_ps(p.weight[k]);
+        value = _mm256_set1_ps(p.value[k]);
+      }
       const __m256 uy = _mm256_set1_ps(static_cast<float>(y + p.dy[k]) + 0.5f);
       const __m256 iz =
           _mm256_div_ps(one, _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(h6, ux), _mm256_mul_ps(h7, uy)), h8));
@@ -266,10 +295,10 @@ __attribute__((target("avx2"))) void batch_costs_avx2(const RefPatch& p, const f
       const __m256 top = _mm256_add_ps(q0, _mm256_mul_ps(fx, _mm256_sub_ps(q1, q0)));
       const __m256 bottom = _mm256_add_ps(q2, _mm256_mul_ps(fx, _mm256_sub_ps(q3, q2)));
       const __m256 v = _mm256_add_ps(top, _mm256_mul_ps(fy, _mm256_sub_ps(bottom, top)));
-      const __m256 wv = _mm256_mul_ps(_mm256_set1_ps(p.weight[k]), v);
+      const __m256 wv = _mm256_mul_ps(weight, v);
       s = _mm256_add_ps(s, wv);
       ss = _mm256_add_ps(ss, _mm256_mul_ps(wv, v));
-      sr = _mm256_add_ps(sr, _mm256_mul_ps(wv, _mm256_set1_ps(p.value[k])));
+      sr = _mm256_add_ps(sr, _mm256_mul_ps(wv, value));
     }
     alignas(32) float S[kLanes], SS[kLanes], SR[kLanes], B[kLanes];
     _mm256_store_ps(S, s);
@@ -280,7 +309,10 @@ __attribute__((target("avx2"))) void batch_costs_avx2(const RefPatch& p, const f
       const auto L = static_cast<std::size_t>(l);
       std::uint32_t bits;
       std::memcpy(&bits, &B[L], sizeof bits);
-      b.cost[G + L] = bits ? kMaxCost : ncc_cost(p, S[L], SS[L], SR[L]);
+      if constexpr (Multi)
+        b.cost[G + L] = bits ? kMaxCost : ncc_cost(true, m->mean[G + L], m->var[G + L], S[L], SS[L], SR[L]);
+      else
+        b.cost[G + L] = bits ? kMaxCost : ncc_cost(p, S[L], SS[L], SR[L]);
     }
   }
 }
@@ -306,7 +338,7 @@ void batch_costs(const RefPatch& p, const Atlas& atlas, int x, int y, CostBatch&
       for (std::size_t r = 0; r < 9; ++r) b.h[r][k] = 0.0f;
       b.base[k] = 0, b.width[k] = 2, b.height[k] = 2, b.invalid[k] = -1;
     }
-    batch_costs_avx2(p, atlas.pixels.data(), x, y, b);
+    batch_costs_avx2<false>(p, atlas.pixels.data(), x, y, b, nullptr);
     return;
   }
 #endif
@@ -428,7 +460,11 @@ public:
   Solver(std::vector<View>& views, const PatchMatchOptions& o)
       : views_(views), o_(o), window_(make_window(o.window_radius, o.window_step, o.sigma_spatial, o.sigma_color)),
         cos_min_angle_(static_cast<float>(std::cos(glm::radians(o.min_triangulation_angle_deg)))),
-        inv_two_ncc_sigma_sq_(static_cast<float>(1.0 / (2.0 * o.ncc_sigma * o.ncc_sigma))), atlas_(make_atlas(greys_of(views))) {}
+        inv_two_ncc_sigma_sq_(static_cast<float>(1.0 / (2.0 * o.ncc_sigma * o.ncc_sigma))), atlas_(make_atlas(greys_of(views))) {
+    window_patch_.count = window_.count;
+    window_patch_.dx = window_.dx;
+    window_patch_.dy = window_.dy;
+  }
 
   // Random planes, and their costs; returns the fraction of textured pixels.
   double initialise(int vi, State& st) {
@@ -472,26 +508,52 @@ public:
     const View& v = views_[static_cast<std::size_t>(vi)];
     const std::size_t S = v.sources.size();
     prepare(vi);
+    // One plane per pixel fills only S lanes: pixels whose windows lie inside the image share the SIMD
+    // lanes, kLanes / S at a time (the same costs as one by one).
+    const bool shared = !costs_known && cache_.view == vi && have_avx2() && 2 * S <= static_cast<std::size_t>(kLanes);
+    const int per_batch = shared ? kLanes / static_cast<int>(S) : 1;
+    const int r = o_.window_radius;
 #pragma omp parallel for schedule(dynamic, 4)
     for (int y = 0; y < v.height; ++y) {
       RefPatch patch;
       CostBatch batch;
+      PixelLanes lanes;
+      std::array<int, kLanes> pending{};
+      int np = 0;
+      const auto total = [&](int x) {
+        const std::size_t i = static_cast<std::size_t>(y) * v.width + x;
+        const float* c = &st.src_cost[i * S];
+        float g[kMaxSources];
+        for (std::size_t s = 0; s < S; ++s) g[s] = geo_of(v, v.sources[s], x, y, st.depth[i]);
+        float w[kMaxSources];
+        weights(v, c, x, y, st.depth[i], w);
+        st.total[i] = combine(w, c, S, g);
+      };
+      const auto flush = [&] {
+        score_pixels(v, st, y, pending.data(), np, batch, lanes);
+        for (int q = 0; q < np; ++q) total(pending[static_cast<std::size_t>(q)]);
+        np = 0;
+      };
+      const bool inside_rows = y >= r && y + r < v.height;
       for (int x = 0; x < v.width; ++x) {
         const std::size_t i = static_cast<std::size_t>(y) * v.width + x;
+        if (shared && inside_rows && x >= r && x + r < v.width) {
+          if (!cache_.textured[i]) continue;
+          pending[static_cast<std::size_t>(np++)] = x;
+          if (np == per_batch) flush();
+          continue;
+        }
         if (!ref_patch(vi, v, x, y, patch)) continue;
-        float* c = &st.src_cost[i * S];
-        float g[kMaxSources];
         if (!costs_known) {
+          float* c = &st.src_cost[i * S];
           batch.n = 0;
           for (std::size_t s = 0; s < S; ++s) add_pair(batch, v, v.sources[s], x, y, st.depth[i], st.normal[i]);
           batch_costs(patch, atlas_, x, y, batch);
           for (std::size_t s = 0; s < S; ++s) c[s] = batch.cost[s];
         }
-        for (std::size_t s = 0; s < S; ++s) g[s] = geo_of(v, v.sources[s], x, y, st.depth[i]);
-        float w[kMaxSources];
-        weights(v, c, x, y, st.depth[i], w);
-        st.total[i] = combine(w, c, S, g);
+        total(x);
       }
+      if (np > 0) flush();
     }
   }
 
@@ -583,6 +645,48 @@ private:
     p.var = cache_.var[i];
     p.textured = true;
     return true;
+  }
+
+  // The photometric costs (st.src_cost) of the current planes of pixels xs[0..np) of row y, side by side:
+  // their windows lie inside the image and the view is in the cache (AVX2 only).
+  void score_pixels(const View& v, State& st, int y, const int* xs, int np, CostBatch& b, PixelLanes& m) const {
+#ifdef D2GS_PM_AVX2
+    const std::size_t S = v.sources.size(), K = static_cast<std::size_t>(window_.count);
+    const float* grey = v.grey.pixels.data();
+    b.n = 0;
+    for (int q = 0; q < np; ++q) {
+      const int x = xs[q];
+      const std::size_t i = static_cast<std::size_t>(y) * v.width + x;
+      const float* w = &cache_.weight[i * K];
+      for (std::size_t k = 0; k < K; ++k) {
+        m.wq[k][static_cast<std::size_t>(q)] = w[k];
+        m.vq[k][static_cast<std::size_t>(q)] =
+            grey[static_cast<std::size_t>(y + window_.dy[k]) * v.width + static_cast<std::size_t>(x + window_.dx[k])];
+      }
+      for (std::size_t s = 0; s < S; ++s) {
+        const auto l = static_cast<std::size_t>(b.n);
+        add_pair(b, v, v.sources[s], x, y, st.depth[i], st.normal[i]);
+        m.xoff[l] = x - xs[0];
+        m.pix[l] = q;
+        m.mean[l] = cache_.mean[i];
+        m.var[l] = cache_.var[i];
+      }
+    }
+    for (int l = b.n; l % kLanes != 0; ++l) {
+      const auto k = static_cast<std::size_t>(l);
+      for (std::size_t row = 0; row < 9; ++row) b.h[row][k] = 0.0f;
+      b.base[k] = 0, b.width[k] = 2, b.height[k] = 2, b.invalid[k] = -1;
+      m.xoff[k] = 0, m.pix[k] = 0;
+    }
+    batch_costs_avx2<true>(window_patch_, atlas_.pixels.data(), xs[0], y, b, &m);
+    for (int q = 0; q < np; ++q) {
+      const std::size_t i = static_cast<std::size_t>(y) * v.width + xs[q];
+      for (std::size_t s = 0; s < S; ++s) st.src_cost[i * S + s] = b.cost[static_cast<std::size_t>(q) * S + s];
+    }
+#else
+    (void)v, (void)st, (void)y, (void)xs, (void)np, (void)b, (void)m;
+    fail("patch match: shared lanes need AVX2");
+#endif
   }
 
   // Appends the pair (the plane at depth z with normal n at pixel (x, y), source s) to the batch; a plane
@@ -733,6 +837,7 @@ private:
   float cos_min_angle_, inv_two_ncc_sigma_sq_;
   std::vector<const std::vector<float>*> geo_maps_;
   Atlas atlas_;
+  RefPatch window_patch_;  // the window's sample offsets (of a pixel whose window lies inside the image)
   struct RefCache {
     int view = -1;
     std::vector<float> weight;  // window_.count per pixel: make_ref_patch's normalised weights
