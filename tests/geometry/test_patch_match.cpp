@@ -6,6 +6,7 @@
 #include <omp.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <set>
 
@@ -118,6 +119,47 @@ TEST(PatchMatchMath, BilateralNccMatchesTheDirectFormula) {
   EXPECT_NEAR(bilateral_ncc_cost(ref, negative, I, 100, 80, 5, 1, 5.0, 0.2), 2.0, 1e-3);
   // No texture in the source window: the maximum cost.
   EXPECT_EQ(bilateral_ncc_cost(ref, Image(ref.width, ref.height, 1, 0.5f), I, 100, 80, 5, 1, 5.0, 0.2), 2.0);
+}
+
+// The stereo scores many (plane, source) pairs of a pixel side by side (SIMD lanes where the CPU has AVX2):
+// every cost must equal the one-pair function's bit for bit (the stereo's output is compared byte for byte
+// across versions), lanes that leave their image and pixels at the border included.
+TEST(PatchMatchMath, BatchedNccCostsEqualTheSinglePairBitForBit) {
+  const auto& cams = scene().cameras();
+  const Image ref = to_grey(scene().render(cams[1]));
+  const Image src_a = to_grey(scene().render(cams[12])), src_b = to_grey(scene().render(cams[5]));
+  Rng rng(17);
+  int compared = 0, finite = 0, maximal = 0;
+  for (int trial = 0; trial < 40; ++trial) {
+    // Interior pixels, and some within the window radius of the border.
+    const int x = trial % 5 == 0 ? static_cast<int>(rng.below(4)) : static_cast<int>(rng.below(static_cast<std::uint64_t>(ref.width)));
+    const int y = trial % 7 == 0 ? ref.height - 1 - static_cast<int>(rng.below(4))
+                                 : static_cast<int>(rng.below(static_cast<std::uint64_t>(ref.height)));
+    std::vector<const Image*> sources;
+    std::vector<glm::dmat3> Hs;
+    const int pairs = 1 + static_cast<int>(rng.below(30));  // partial and several SIMD groups
+    for (int k = 0; k < pairs; ++k) {
+      const bool a = rng.uniform() < 0.5;
+      const glm::dvec3 n = glm::normalize(glm::dvec3(0.3 * rng.normal(), 0.3 * rng.normal(), -1.0));
+      sources.push_back(a ? &src_a : &src_b);
+      Hs.push_back(plane_homography(cams[1], cams[a ? 12 : 5], x, y, 2.0 + 15.0 * rng.uniform(), n));
+    }
+    for (int step : {1, 2}) {
+      const auto batched = bilateral_ncc_costs(ref, sources, Hs, x, y, 5, step, 5.0, 0.2);
+      ASSERT_EQ(batched.size(), sources.size());
+      for (std::size_t k = 0; k < sources.size(); ++k) {
+        const double single = bilateral_ncc_cost(ref, *sources[k], Hs[k], x, y, 5, step, 5.0, 0.2);
+        EXPECT_EQ(std::bit_cast<std::uint64_t>(batched[k]), std::bit_cast<std::uint64_t>(single))
+            << x << "," << y << " pair " << k << ": " << batched[k] << " vs " << single;
+        ++compared;
+        finite += single < 2.0;
+        maximal += single == 2.0;
+      }
+    }
+  }
+  EXPECT_GT(compared, 400);
+  EXPECT_GT(finite, 100);  // real NCC values were compared
+  EXPECT_GT(maximal, 10);  // and lanes that left the source image
 }
 
 // Three views of the synthetic scene (a wide triangle of the camera grid) with their exact depth maps.

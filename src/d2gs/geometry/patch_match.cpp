@@ -2,8 +2,14 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
+#include <cstring>
 #include <limits>
 #include <numeric>
+
+#if defined(__x86_64__) && defined(__GNUC__)
+#include <immintrin.h>
+#endif
 
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/random.hpp"
@@ -107,6 +113,15 @@ void make_ref_patch(const Window& w, const Image& grey, int x, int y, RefPatch& 
   for (int i = 0; i < p.count; ++i) p.weight[static_cast<std::size_t>(i)] *= inv;
 }
 
+// 1 − NCC from the weighted sums of the source samples (s = Σwv, ss = Σwv², sr = Σwv·ref).
+inline float ncc_cost(bool textured, float mean, float ref_var, float s, float ss, float sr) {
+  const float var = ss - s * s;
+  if (!textured || var < kMinVariance) return kMaxCost;
+  const float cov = sr - s * mean;
+  return std::clamp(1.0f - cov / std::sqrt(ref_var * var), 0.0f, kMaxCost);
+}
+inline float ncc_cost(const RefPatch& p, float s, float ss, float sr) { return ncc_cost(p.textured, p.mean, p.var, s, ss, sr); }
+
 // 1 − NCC of the reference patch at pixel (x, y) against `src` through the homography (row-major h[9]).
 float patch_cost(const RefPatch& p, const Image& src, const float* h, int x, int y) {
   float s = 0, ss = 0, sr = 0;
@@ -129,10 +144,206 @@ float patch_cost(const RefPatch& p, const Image& src, const float* h, int x, int
     const float wv = p.weight[k] * v;
     s += wv, ss += wv * v, sr += wv * p.value[k];
   }
-  const float var = ss - s * s;
-  if (!p.textured || var < kMinVariance) return kMaxCost;
-  const float cov = sr - s * p.mean;
-  return std::clamp(1.0f - cov / std::sqrt(p.var * var), 0.0f, kMaxCost);
+  return ncc_cost(p, s, ss, sr);
+}
+
+std::vector<const Image*> greys_of(const std::vector<View>& views) {
+  std::vector<const Image*> g;
+  for (const View& v : views) g.push_back(&v.grey);
+  return g;
+}
+
+// ---- the costs of many (plane, source) pairs of one pixel at once ----
+// Every pair is one SIMD lane: lane l runs, sample by sample and in the same order, exactly the float
+// operations of patch_cost (no fused multiply-add, no reassociation), so its cost is bit-identical to
+// patch_cost's; only the lanes run side by side. The source images of a pyramid level lie in one buffer
+// (the atlas) so that lanes of different sources gather from one base pointer.
+
+constexpr int kLanes = 8;
+constexpr int kMaxPairs = 12 * kMaxSources;  // candidates of one pixel (8 regions + 4) × sources
+
+struct Atlas {
+  std::vector<float> pixels;  // the grey images of the views, one after the other, then padding
+  std::vector<int> offset;    // first pixel of each view
+};
+
+Atlas make_atlas(const std::vector<const Image*>& images) {
+  Atlas a;
+  std::size_t total = 0, widest = 0;
+  for (const Image* im : images) total += im->pixels.size(), widest = std::max(widest, static_cast<std::size_t>(im->width));
+  if (total + 2 * widest + 2 >= static_cast<std::size_t>(std::numeric_limits<int>::max()))
+    fail("patch match: the images of a level are too large ({} pixels)", total);
+  a.pixels.reserve(total + 2 * widest + 2);
+  for (const Image* im : images) {
+    a.offset.push_back(static_cast<int>(a.pixels.size()));
+    a.pixels.insert(a.pixels.end(), im->pixels.begin(), im->pixels.end());
+  }
+  // A lane whose sample left its image reads (and discards) its image's first 2×2 pixels: padding keeps a
+  // one-row last image inside the buffer.
+  a.pixels.resize(total + 2 * widest + 2, 0.0f);
+  return a;
+}
+
+struct CostBatch {
+  int n = 0;
+  alignas(32) std::array<std::array<float, kMaxPairs + kLanes>, 9> h{};  // row-major homography, per lane
+  alignas(32) std::array<int, kMaxPairs + kLanes> base{}, width{}, height{}, invalid{};
+  std::array<const Image*, kMaxPairs + kLanes> image{};
+  std::array<float, kMaxPairs + kLanes> cost{};
+};
+
+// Lanes of several pixels of one row (batch_costs_avx2<true>).
+struct PixelLanes {
+  alignas(32) std::array<int, kLanes> xoff{}, pix{};
+  std::array<float, kLanes> mean{}, var{};
+  alignas(32) std::array<std::array<float, kLanes>, kMaxSamples> wq{}, vq{};
+};
+
+void batch_costs_scalar(const RefPatch& p, int x, int y, CostBatch& b) {
+  for (int l = 0; l < b.n; ++l) {
+    const auto k = static_cast<std::size_t>(l);
+    if (b.invalid[k]) {
+      b.cost[k] = kMaxCost;
+      continue;
+    }
+    float h[9];
+    for (std::size_t r = 0; r < 9; ++r) h[r] = b.h[r][k];
+    b.cost[k] = patch_cost(p, *b.image[k], h, x, y);
+  }
+}
+
+#if defined(__x86_64__) && defined(__GNUC__)
+#define D2GS_PM_AVX2 1
+// The horizontal neighbours (atlas[idx_l], atlas[idx_l + 1]) of 8 lanes, by 64-bit loads (cheaper than
+// four gathers on the CPUs measured): lo = atlas[idx], hi = atlas[idx + 1], lane for lane.
+__attribute__((target("avx2"))) inline void load_pairs(const float* atlas, __m256i idx, __m256& lo, __m256& hi) {
+  alignas(32) int id[kLanes];
+  _mm256_store_si256(reinterpret_cast<__m256i*>(id), idx);
+  const auto pair = [&](int l) { return _mm_castsi128_ps(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(atlas + id[l]))); };
+  const auto high = [&](__m128 a, int l) { return _mm_loadh_pi(a, reinterpret_cast<const __m64*>(atlas + id[l])); };
+  const __m128 a01 = high(pair(0), 1), a23 = high(pair(2), 3), a45 = high(pair(4), 5), a67 = high(pair(6), 7);
+  const __m256 A = _mm256_insertf128_ps(_mm256_castps128_ps256(a01), a45, 1);  // 0 0' 1 1' | 4 4' 5 5'
+  const __m256 B = _mm256_insertf128_ps(_mm256_castps128_ps256(a23), a67, 1);  // 2 2' 3 3' | 6 6' 7 7'
+  lo = _mm256_shuffle_ps(A, B, _MM_SHUFFLE(2, 0, 2, 0));
+  hi = _mm256_shuffle_ps(A, B, _MM_SHUFFLE(3, 1, 3, 1));
+}
+
+// AVX2 without FMA (the target adds no "fma"): each lane's arithmetic is patch_cost's.
+// With `Multi`, the lanes belong to up to kLanes pixels of one row whose windows lie inside the image (the
+// same samples): lane l is pixel m->pix[l] at column x + m->xoff[l], its weights and values m->wq / m->vq
+// (sample-major, one column per pixel), its mean and variance m->mean / m->var; `p` only gives the samples'
+// offsets. Otherwise every lane is pixel (x, y) with reference patch p.
+template <bool Multi>
+__attribute__((target("avx2"))) void batch_costs_avx2(const RefPatch& p, const float* atlas, int x, int y, CostBatch& b,
+                                                      const PixelLanes* m) {
+  const __m256 zero = _mm256_setzero_ps(), one = _mm256_set1_ps(1.0f), half = _mm256_set1_ps(0.5f);
+  const __m256 all = _mm256_castsi256_ps(_mm256_set1_epi32(-1));
+  const __m256i one_i = _mm256_set1_epi32(1);
+  for (int g = 0; g < b.n; g += kLanes) {
+    const auto G = static_cast<std::size_t>(g);
+    const __m256 h0 = _mm256_load_ps(&b.h[0][G]), h1 = _mm256_load_ps(&b.h[1][G]), h2 = _mm256_load_ps(&b.h[2][G]);
+    const __m256 h3 = _mm256_load_ps(&b.h[3][G]), h4 = _mm256_load_ps(&b.h[4][G]), h5 = _mm256_load_ps(&b.h[5][G]);
+    const __m256 h6 = _mm256_load_ps(&b.h[6][G]), h7 = _mm256_load_ps(&b.h[7][G]), h8 = _mm256_load_ps(&b.h[8][G]);
+    const __m256i base = _mm256_load_si256(reinterpret_cast<const __m256i*>(&b.base[G]));
+    const __m256i wi = _mm256_load_si256(reinterpret_cast<const __m256i*>(&b.width[G]));
+    const __m256i hi = _mm256_load_si256(reinterpret_cast<const __m256i*>(&b.height[G]));
+    const __m256 wm1 = _mm256_cvtepi32_ps(_mm256_sub_epi32(wi, one_i)), hm1 = _mm256_cvtepi32_ps(_mm256_sub_epi32(hi, one_i));
+    __m256 bad = _mm256_castsi256_ps(_mm256_load_si256(reinterpret_cast<const __m256i*>(&b.invalid[G])));
+    __m256 s = zero, ss = zero, sr = zero;
+    __m256i xoff = _mm256_setzero_si256(), pix = _mm256_setzero_si256();
+    if constexpr (Multi) {
+      xoff = _mm256_load_si256(reinterpret_cast<const __m256i*>(&m->xoff[G]));
+      pix = _mm256_load_si256(reinterpret_cast<const __m256i*>(&m->pix[G]));
+    }
+    for (int i = 0; i < p.count; ++i) {
+      const auto k = static_cast<std::size_t>(i);
+      __m256 ux, weight, value;
+      if constexpr (Multi) {
+        // static_cast<float>(x_l + dx) + 0.5f of each lane: the integer sum is exact, then the same rounding.
+        ux = _mm256_add_ps(_mm256_cvtepi32_ps(_mm256_add_epi32(_mm256_set1_epi32(x + p.dx[k]), xoff)), half);
+        weight = _mm256_permutevar8x32_ps(_mm256_load_ps(m->wq[k].data()), pix);
+        value = _mm256_permutevar8x32_ps(_mm256_load_ps(m->vq[k].data()), pix);
+      } else {
+        ux = _mm256_set1_ps(static_cast<float>(x + p.dx[k]) + 0.5f);
+        weight = _mm256_set1_ps(p.weight[k]);
+        value = _mm256_set1_ps(p.value[k]);
+      }
+      const __m256 uy = _mm256_set1_ps(static_cast<float>(y + p.dy[k]) + 0.5f);
+      const __m256 iz =
+          _mm256_div_ps(one, _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(h6, ux), _mm256_mul_ps(h7, uy)), h8));
+      __m256 sx = _mm256_sub_ps(
+          _mm256_mul_ps(_mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(h0, ux), _mm256_mul_ps(h1, uy)), h2), iz), half);
+      __m256 sy = _mm256_sub_ps(
+          _mm256_mul_ps(_mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(h3, ux), _mm256_mul_ps(h4, uy)), h5), iz), half);
+      const __m256 ok = _mm256_and_ps(_mm256_and_ps(_mm256_cmp_ps(sx, zero, _CMP_GE_OQ), _mm256_cmp_ps(sy, zero, _CMP_GE_OQ)),
+                                      _mm256_and_ps(_mm256_cmp_ps(sx, wm1, _CMP_LT_OQ), _mm256_cmp_ps(sy, hm1, _CMP_LT_OQ)));
+      bad = _mm256_or_ps(bad, _mm256_xor_ps(ok, all));
+      sx = _mm256_and_ps(sx, ok);  // a lane that left its image samples (0, 0) and is discarded
+      sy = _mm256_and_ps(sy, ok);
+      const __m256i ix = _mm256_cvttps_epi32(sx), iy = _mm256_cvttps_epi32(sy);
+      const __m256 fx = _mm256_sub_ps(sx, _mm256_cvtepi32_ps(ix)), fy = _mm256_sub_ps(sy, _mm256_cvtepi32_ps(iy));
+      const __m256i idx = _mm256_add_epi32(base, _mm256_add_epi32(_mm256_mullo_epi32(iy, wi), ix));
+      const __m256i idx2 = _mm256_add_epi32(idx, wi);
+#ifdef D2GS_PM_GATHER
+      const __m256 q0 = _mm256_i32gather_ps(atlas, idx, 4), q1 = _mm256_i32gather_ps(atlas + 1, idx, 4);
+      const __m256 q2 = _mm256_i32gather_ps(atlas, idx2, 4), q3 = _mm256_i32gather_ps(atlas + 1, idx2, 4);
+#else
+      __m256 q0, q1, q2, q3;
+      load_pairs(atlas, idx, q0, q1);
+      load_pairs(atlas, idx2, q2, q3);
+#endif
+      const __m256 top = _mm256_add_ps(q0, _mm256_mul_ps(fx, _mm256_sub_ps(q1, q0)));
+      const __m256 bottom = _mm256_add_ps(q2, _mm256_mul_ps(fx, _mm256_sub_ps(q3, q2)));
+      const __m256 v = _mm256_add_ps(top, _mm256_mul_ps(fy, _mm256_sub_ps(bottom, top)));
+      const __m256 wv = _mm256_mul_ps(weight, v);
+      s = _mm256_add_ps(s, wv);
+      ss = _mm256_add_ps(ss, _mm256_mul_ps(wv, v));
+      sr = _mm256_add_ps(sr, _mm256_mul_ps(wv, value));
+    }
+    alignas(32) float S[kLanes], SS[kLanes], SR[kLanes], B[kLanes];
+    _mm256_store_ps(S, s);
+    _mm256_store_ps(SS, ss);
+    _mm256_store_ps(SR, sr);
+    _mm256_store_ps(B, bad);
+    for (int l = 0; l < kLanes && g + l < b.n; ++l) {
+      const auto L = static_cast<std::size_t>(l);
+      std::uint32_t bits;
+      std::memcpy(&bits, &B[L], sizeof bits);
+      if constexpr (Multi)
+        b.cost[G + L] = bits ? kMaxCost : ncc_cost(true, m->mean[G + L], m->var[G + L], S[L], SS[L], SR[L]);
+      else
+        b.cost[G + L] = bits ? kMaxCost : ncc_cost(p, S[L], SS[L], SR[L]);
+    }
+  }
+}
+#endif
+
+bool have_avx2() {
+#ifdef D2GS_PM_AVX2
+  static const bool yes = __builtin_cpu_supports("avx2") && std::getenv("D2GS_PM_SCALAR") == nullptr;
+  return yes;
+#else
+  return false;
+#endif
+}
+
+// Scores the batch's pairs against reference patch `p` at pixel (x, y): b.cost[l] = patch_cost of lane l
+// (kMaxCost for an invalid lane).
+void batch_costs(const RefPatch& p, const Atlas& atlas, int x, int y, CostBatch& b) {
+#ifdef D2GS_PM_AVX2
+  if (have_avx2()) {
+    // Padding lanes up to the next multiple of kLanes: invalid, zero homography, inside the atlas.
+    for (int l = b.n; l % kLanes != 0; ++l) {
+      const auto k = static_cast<std::size_t>(l);
+      for (std::size_t r = 0; r < 9; ++r) b.h[r][k] = 0.0f;
+      b.base[k] = 0, b.width[k] = 2, b.height[k] = 2, b.invalid[k] = -1;
+    }
+    batch_costs_avx2<false>(p, atlas.pixels.data(), x, y, b, nullptr);
+    return;
+  }
+#endif
+  (void)atlas;
+  batch_costs_scalar(p, x, y, b);
 }
 
 // H = A + b·mᵀ, m = K_ref⁻ᵀ n / ρ with ρ = n·X₀ (X₀ the point at depth z on the pixel's ray), row-major.
@@ -249,7 +460,11 @@ public:
   Solver(std::vector<View>& views, const PatchMatchOptions& o)
       : views_(views), o_(o), window_(make_window(o.window_radius, o.window_step, o.sigma_spatial, o.sigma_color)),
         cos_min_angle_(static_cast<float>(std::cos(glm::radians(o.min_triangulation_angle_deg)))),
-        inv_two_ncc_sigma_sq_(static_cast<float>(1.0 / (2.0 * o.ncc_sigma * o.ncc_sigma))) {}
+        inv_two_ncc_sigma_sq_(static_cast<float>(1.0 / (2.0 * o.ncc_sigma * o.ncc_sigma))), atlas_(make_atlas(greys_of(views))) {
+    window_patch_.count = window_.count;
+    window_patch_.dx = window_.dx;
+    window_patch_.dy = window_.dy;
+  }
 
   // Random planes, and their costs; returns the fraction of textured pixels.
   double initialise(int vi, State& st) {
@@ -259,20 +474,24 @@ public:
     st.normal.assign(n, glm::vec3(0.0f));
     st.total.assign(n, kMaxCost);
     st.src_cost.assign(n * S, kMaxCost);
+    prepare(vi);
     std::size_t textured = 0;
 #pragma omp parallel for schedule(dynamic, 4) reduction(+ : textured)
     for (int y = 0; y < v.height; ++y) {
       RefPatch patch;
+      CostBatch batch;
       for (int x = 0; x < v.width; ++x) {
         const std::size_t i = static_cast<std::size_t>(y) * v.width + x;
         Rng rng = pixel_rng(o_.seed, vi, i, 0);
         st.depth[i] = random_depth(rng, v);
         st.normal[i] = random_normal(rng, v.ray(x, y));
-        make_ref_patch(window_, v.grey, x, y, patch);
-        if (!patch.textured) continue;
+        if (!ref_patch(vi, v, x, y, patch)) continue;
         ++textured;
         float* c = &st.src_cost[i * S];
-        for (std::size_t s = 0; s < S; ++s) c[s] = cost_of(v, v.sources[s], patch, x, y, st.depth[i], st.normal[i]);
+        batch.n = 0;
+        for (std::size_t s = 0; s < S; ++s) add_pair(batch, v, v.sources[s], x, y, st.depth[i], st.normal[i]);
+        batch_costs(patch, atlas_, x, y, batch);
+        for (std::size_t s = 0; s < S; ++s) c[s] = batch.cost[s];
         float w[kMaxSources];
         weights(v, c, x, y, st.depth[i], w);
         st.total[i] = combine(w, c, S);
@@ -281,27 +500,60 @@ public:
     return static_cast<double>(textured) / static_cast<double>(n);
   }
 
-  // Starts from given planes (the photometric stage's), recomputing their costs.
-  void initialise_from(int vi, State& st) {
+  // Starts from given planes (the photometric stage's), recomputing their costs; with `costs_known`, the
+  // photometric costs in `st` are already those of its planes against this solver's images (the geometric
+  // stage after the finest photometric one: the same planes, patches and images give the same costs, bit
+  // for bit), and only the totals are recomputed.
+  void initialise_from(int vi, State& st, bool costs_known = false) {
     const View& v = views_[static_cast<std::size_t>(vi)];
     const std::size_t S = v.sources.size();
+    prepare(vi);
+    // One plane per pixel fills only S lanes: pixels whose windows lie inside the image share the SIMD
+    // lanes, kLanes / S at a time (the same costs as one by one).
+    const bool shared = !costs_known && cache_.view == vi && have_avx2() && 2 * S <= static_cast<std::size_t>(kLanes);
+    const int per_batch = shared ? kLanes / static_cast<int>(S) : 1;
+    const int r = o_.window_radius;
 #pragma omp parallel for schedule(dynamic, 4)
     for (int y = 0; y < v.height; ++y) {
       RefPatch patch;
-      for (int x = 0; x < v.width; ++x) {
+      CostBatch batch;
+      PixelLanes lanes;
+      std::array<int, kLanes> pending{};
+      int np = 0;
+      const auto total = [&](int x) {
         const std::size_t i = static_cast<std::size_t>(y) * v.width + x;
-        make_ref_patch(window_, v.grey, x, y, patch);
-        if (!patch.textured) continue;
-        float* c = &st.src_cost[i * S];
+        const float* c = &st.src_cost[i * S];
         float g[kMaxSources];
-        for (std::size_t s = 0; s < S; ++s) {
-          c[s] = cost_of(v, v.sources[s], patch, x, y, st.depth[i], st.normal[i]);
-          g[s] = geo_of(v, v.sources[s], x, y, st.depth[i]);
-        }
+        for (std::size_t s = 0; s < S; ++s) g[s] = geo_of(v, v.sources[s], x, y, st.depth[i]);
         float w[kMaxSources];
         weights(v, c, x, y, st.depth[i], w);
         st.total[i] = combine(w, c, S, g);
+      };
+      const auto flush = [&] {
+        score_pixels(v, st, y, pending.data(), np, batch, lanes);
+        for (int q = 0; q < np; ++q) total(pending[static_cast<std::size_t>(q)]);
+        np = 0;
+      };
+      const bool inside_rows = y >= r && y + r < v.height;
+      for (int x = 0; x < v.width; ++x) {
+        const std::size_t i = static_cast<std::size_t>(y) * v.width + x;
+        if (shared && inside_rows && x >= r && x + r < v.width) {
+          if (!cache_.textured[i]) continue;
+          pending[static_cast<std::size_t>(np++)] = x;
+          if (np == per_batch) flush();
+          continue;
+        }
+        if (!ref_patch(vi, v, x, y, patch)) continue;
+        if (!costs_known) {
+          float* c = &st.src_cost[i * S];
+          batch.n = 0;
+          for (std::size_t s = 0; s < S; ++s) add_pair(batch, v, v.sources[s], x, y, st.depth[i], st.normal[i]);
+          batch_costs(patch, atlas_, x, y, batch);
+          for (std::size_t s = 0; s < S; ++s) c[s] = batch.cost[s];
+        }
+        total(x);
       }
+      if (np > 0) flush();
     }
   }
 
@@ -310,6 +562,7 @@ public:
   // `wide`: candidates from all 8 regions and a random plane (exploration); otherwise only the 4 regions
   // next to the pixel and the perturbations (refinement, at the finest level).
   void iterate(int vi, State& st, int sweep, float perturbation, bool wide) {
+    prepare(vi);
     for (int colour = 0; colour < 2; ++colour) half_sweep(vi, st, colour, sweep + colour, perturbation, wide);
   }
 
@@ -338,11 +591,122 @@ public:
   }
 
 private:
-  float cost_of(const View& v, const Source& s, const RefPatch& p, int x, int y, float z, const glm::vec3& n) const {
-    if (!(z > 0.0f) || !(glm::dot(n, v.ray(x, y)) < 0.0f)) return kMaxCost;
+  // The reference windows of view `vi` (bilateral weights, mean, variance: the exponentials) computed once
+  // for the solver's stages on that view instead of once per half-sweep; above a memory budget they are
+  // computed on the fly, as make_ref_patch does either way (the same numbers).
+  void prepare(int vi) {
+    if (cache_.view == vi) return;
+    const View& v = views_[static_cast<std::size_t>(vi)];
+    const std::size_t n = static_cast<std::size_t>(v.width) * v.height, K = static_cast<std::size_t>(window_.count);
+    constexpr std::size_t kBudgetBytes = std::size_t{768} << 20;
+    cache_.view = -1;
+    if (n * K * sizeof(float) > kBudgetBytes) return;
+    cache_.weight.resize(n * K);
+    cache_.mean.resize(n);
+    cache_.var.resize(n);
+    cache_.textured.resize(n);
+#pragma omp parallel for schedule(dynamic, 4)
+    for (int y = 0; y < v.height; ++y) {
+      RefPatch p;
+      for (int x = 0; x < v.width; ++x) {
+        const std::size_t i = static_cast<std::size_t>(y) * v.width + x;
+        make_ref_patch(window_, v.grey, x, y, p);
+        cache_.textured[i] = p.textured ? 1 : 0;
+        cache_.mean[i] = p.mean;
+        cache_.var[i] = p.var;
+        std::copy(p.weight.begin(), p.weight.begin() + p.count, cache_.weight.begin() + static_cast<std::ptrdiff_t>(i * K));
+      }
+    }
+    cache_.view = vi;
+  }
+
+  // The reference patch of pixel (x, y) of view vi (make_ref_patch's, from the cache when it holds the
+  // view); false, with `p` unspecified, when the window has no texture.
+  bool ref_patch(int vi, const View& v, int x, int y, RefPatch& p) const {
+    if (cache_.view != vi) {
+      make_ref_patch(window_, v.grey, x, y, p);
+      return p.textured;
+    }
+    const std::size_t i = static_cast<std::size_t>(y) * v.width + x;
+    if (!cache_.textured[i]) return false;
+    const float* weight = &cache_.weight[i * static_cast<std::size_t>(window_.count)];
+    const Image& grey = v.grey;
+    p.count = 0;
+    for (int k = 0; k < window_.count; ++k) {
+      const int xx = x + window_.dx[static_cast<std::size_t>(k)], yy = y + window_.dy[static_cast<std::size_t>(k)];
+      if (xx < 0 || yy < 0 || xx >= grey.width || yy >= grey.height) continue;
+      const auto j = static_cast<std::size_t>(p.count++);
+      p.dx[j] = window_.dx[static_cast<std::size_t>(k)];
+      p.dy[j] = window_.dy[static_cast<std::size_t>(k)];
+      p.value[j] = grey.pixels[static_cast<std::size_t>(yy) * grey.width + xx];
+      p.weight[j] = weight[j];
+    }
+    p.mean = cache_.mean[i];
+    p.var = cache_.var[i];
+    p.textured = true;
+    return true;
+  }
+
+  // The photometric costs (st.src_cost) of the current planes of pixels xs[0..np) of row y, side by side:
+  // their windows lie inside the image and the view is in the cache (AVX2 only).
+  void score_pixels(const View& v, State& st, int y, const int* xs, int np, CostBatch& b, PixelLanes& m) const {
+#ifdef D2GS_PM_AVX2
+    const std::size_t S = v.sources.size(), K = static_cast<std::size_t>(window_.count);
+    const float* grey = v.grey.pixels.data();
+    b.n = 0;
+    for (int q = 0; q < np; ++q) {
+      const int x = xs[q];
+      const std::size_t i = static_cast<std::size_t>(y) * v.width + x;
+      const float* w = &cache_.weight[i * K];
+      for (std::size_t k = 0; k < K; ++k) {
+        m.wq[k][static_cast<std::size_t>(q)] = w[k];
+        m.vq[k][static_cast<std::size_t>(q)] =
+            grey[static_cast<std::size_t>(y + window_.dy[k]) * v.width + static_cast<std::size_t>(x + window_.dx[k])];
+      }
+      for (std::size_t s = 0; s < S; ++s) {
+        const auto l = static_cast<std::size_t>(b.n);
+        add_pair(b, v, v.sources[s], x, y, st.depth[i], st.normal[i]);
+        m.xoff[l] = x - xs[0];
+        m.pix[l] = q;
+        m.mean[l] = cache_.mean[i];
+        m.var[l] = cache_.var[i];
+      }
+    }
+    for (int l = b.n; l % kLanes != 0; ++l) {
+      const auto k = static_cast<std::size_t>(l);
+      for (std::size_t row = 0; row < 9; ++row) b.h[row][k] = 0.0f;
+      b.base[k] = 0, b.width[k] = 2, b.height[k] = 2, b.invalid[k] = -1;
+      m.xoff[k] = 0, m.pix[k] = 0;
+    }
+    batch_costs_avx2<true>(window_patch_, atlas_.pixels.data(), xs[0], y, b, &m);
+    for (int q = 0; q < np; ++q) {
+      const std::size_t i = static_cast<std::size_t>(y) * v.width + xs[q];
+      for (std::size_t s = 0; s < S; ++s) st.src_cost[i * S + s] = b.cost[static_cast<std::size_t>(q) * S + s];
+    }
+#else
+    (void)v, (void)st, (void)y, (void)xs, (void)np, (void)b, (void)m;
+    fail("patch match: shared lanes need AVX2");
+#endif
+  }
+
+  // Appends the pair (the plane at depth z with normal n at pixel (x, y), source s) to the batch; a plane
+  // behind the camera or seen edge-on is an invalid lane (cost kMaxCost).
+  void add_pair(CostBatch& b, const View& v, const Source& s, int x, int y, float z, const glm::vec3& n) const {
+    const auto l = static_cast<std::size_t>(b.n++);
+    const View& sv = views_[static_cast<std::size_t>(s.view)];
+    b.image[l] = &sv.grey;
+    b.base[l] = atlas_.offset[static_cast<std::size_t>(s.view)];
+    b.width[l] = sv.grey.width;
+    b.height[l] = sv.grey.height;
+    if (!(z > 0.0f) || !(glm::dot(n, v.ray(x, y)) < 0.0f)) {
+      b.invalid[l] = -1;
+      for (std::size_t r = 0; r < 9; ++r) b.h[r][l] = 0.0f;
+      return;
+    }
+    b.invalid[l] = 0;
     float h[9];
     homography(v, s, x, y, z, n, h);
-    return patch_cost(p, views_[static_cast<std::size_t>(s.view)].grey, h, x, y);
+    for (std::size_t r = 0; r < 9; ++r) b.h[r][l] = h[static_cast<std::size_t>(r)];
   }
 
   float geo_of(const View& v, const Source& s, int x, int y, float z) const {
@@ -380,10 +744,10 @@ private:
 #pragma omp parallel for schedule(dynamic, 4)
     for (int y = 0; y < v.height; ++y) {
       RefPatch patch;
+      CostBatch batch;
       for (int x = (y + colour) & 1; x < v.width; x += 2) {
         const std::size_t i = static_cast<std::size_t>(y) * v.width + x;
-        make_ref_patch(window_, v.grey, x, y, patch);
-        if (!patch.textured) continue;
+        if (!ref_patch(vi, v, x, y, patch)) continue;
         Rng rng = pixel_rng(o_.seed, vi, i, sweep);
         const glm::vec3 ray = v.ray(x, y);
         float* cur_cost = &st.src_cost[i * S];
@@ -440,13 +804,17 @@ private:
           cand[static_cast<std::size_t>(nc++)] = {zr, random_normal(rng, ray)};
         }
 
-        float c[kMaxSources], gc[kMaxSources];
+        batch.n = 0;
+        for (int k = 0; k < nc; ++k)
+          for (std::size_t s = 0; s < S; ++s)
+            add_pair(batch, v, v.sources[s], x, y, cand[static_cast<std::size_t>(k)].depth,
+                     cand[static_cast<std::size_t>(k)].normal);
+        batch_costs(patch, atlas_, x, y, batch);
+        float gc[kMaxSources];
         for (int k = 0; k < nc; ++k) {
           const Hypothesis& hyp = cand[static_cast<std::size_t>(k)];
-          for (std::size_t s = 0; s < S; ++s) {
-            c[s] = cost_of(v, v.sources[s], patch, x, y, hyp.depth, hyp.normal);
-            gc[s] = geo ? geo_of(v, v.sources[s], x, y, hyp.depth) : 0.0f;
-          }
+          const float* c = &batch.cost[static_cast<std::size_t>(k) * S];
+          for (std::size_t s = 0; s < S; ++s) gc[s] = geo ? geo_of(v, v.sources[s], x, y, hyp.depth) : 0.0f;
           const float t = combine(w, c, S, geo ? gc : nullptr);
           if (t < best_total) {
             best_total = t;
@@ -468,6 +836,14 @@ private:
   Regions regions_;
   float cos_min_angle_, inv_two_ncc_sigma_sq_;
   std::vector<const std::vector<float>*> geo_maps_;
+  Atlas atlas_;
+  RefPatch window_patch_;  // the window's sample offsets (of a pixel whose window lies inside the image)
+  struct RefCache {
+    int view = -1;
+    std::vector<float> weight;  // window_.count per pixel: make_ref_patch's normalised weights
+    std::vector<float> mean, var;
+    std::vector<std::uint8_t> textured;
+  } cache_;
 };
 
 }  // namespace
@@ -537,6 +913,33 @@ double bilateral_ncc_cost(const Image& ref, const Image& src, const glm::dmat3& 
   for (int r = 0; r < 3; ++r)
     for (int c = 0; c < 3; ++c) h[r * 3 + c] = static_cast<float>(H[c][r]);
   return patch_cost(p, src, h, x, y);
+}
+
+std::vector<double> bilateral_ncc_costs(const Image& ref, const std::vector<const Image*>& sources,
+                                        const std::vector<glm::dmat3>& homographies, int x, int y, int radius, int step,
+                                        double sigma_spatial, double sigma_color) {
+  if (sources.size() != homographies.size()) fail("patch match: {} sources and {} homographies", sources.size(), homographies.size());
+  if (sources.size() > static_cast<std::size_t>(kMaxPairs)) fail("patch match: at most {} pairs at once", kMaxPairs);
+  if (radius > kMaxWindowRadius) fail("patch match: window radius must be at most {}", kMaxWindowRadius);
+  for (const Image* s : sources)
+    if (ref.channels != 1 || s->channels != 1) fail("patch match: NCC takes grey images");
+  const Window w = make_window(radius, step, sigma_spatial, sigma_color);
+  RefPatch p;
+  make_ref_patch(w, ref, x, y, p);
+  const Atlas atlas = make_atlas(sources);
+  CostBatch b;
+  for (std::size_t l = 0; l < sources.size(); ++l) {
+    b.image[l] = sources[l];
+    b.base[l] = atlas.offset[l];
+    b.width[l] = sources[l]->width;
+    b.height[l] = sources[l]->height;
+    b.invalid[l] = 0;
+    for (std::size_t r = 0; r < 3; ++r)
+      for (std::size_t c = 0; c < 3; ++c) b.h[r * 3 + c][l] = static_cast<float>(homographies[l][static_cast<glm::length_t>(c)][static_cast<glm::length_t>(r)]);
+  }
+  b.n = static_cast<int>(sources.size());
+  batch_costs(p, atlas, x, y, b);
+  return std::vector<double>(b.cost.begin(), b.cost.begin() + b.n);
 }
 
 namespace {
@@ -681,7 +1084,7 @@ std::vector<PatchMatchMap> patch_match_stereo(const std::vector<const Camera*>& 
     for (std::size_t i = 0; i < n; ++i) maps[i] = &photometric[i];
     solver.set_geometric(maps);
     for (std::size_t i = 0; i < n; ++i) {
-      solver.initialise_from(static_cast<int>(i), states[i]);
+      solver.initialise_from(static_cast<int>(i), states[i], /*costs_known=*/true);
       for (int it = 0; it < o.geometric_iterations; ++it)
         solver.iterate(static_cast<int>(i), states[i], sweep + 2 * it, std::pow(0.5f, static_cast<float>(step + it)),
                        false);

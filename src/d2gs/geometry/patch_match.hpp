@@ -109,6 +109,13 @@ double plane_depth_at(const Camera& camera, int x1, int y1, double z1, const glm
 double bilateral_ncc_cost(const Image& ref, const Image& src, const glm::dmat3& H, int x, int y, int radius, int step,
                           double sigma_spatial, double sigma_color);
 
+// bilateral_ncc_cost of `ref` at (x, y) against sources[l] through homographies[l] for every l, computed
+// as the stereo computes them (several pairs side by side in SIMD lanes where the CPU has AVX2); equal bit
+// for bit to bilateral_ncc_cost. At most 192 pairs.
+std::vector<double> bilateral_ncc_costs(const Image& ref, const std::vector<const Image*>& sources,
+                                        const std::vector<glm::dmat3>& homographies, int x, int y, int radius, int step,
+                                        double sigma_spatial, double sigma_color);
+
 // Grey values in [0, 1] (0.299 R + 0.587 G + 0.114 B) of an RGB image; a one-channel image is copied.
 Image to_grey(const Image& image);
 
