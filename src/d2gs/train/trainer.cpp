@@ -62,6 +62,7 @@ struct Trainer::State {
   GradientStats stats;
   std::unique_ptr<render::Rasterizer> rasterizer;
   Ssim<float> ssim;
+  std::vector<Ssim<float>::Reference> ssim_refs;  // by position in split.train: the images' local statistics
   int iteration = 0;
   int active_sh = 0;
   Rng rng_cameras, rng_dropout, rng_densify;
@@ -212,6 +213,8 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
     s.train_images.push_back(load_image(s.scene, v));
     s.train_cameras.push_back(render::make_render_camera(s.scene.cameras[static_cast<std::size_t>(v)]));
   }
+  for (const Image& image : s.train_images)
+    s.ssim_refs.push_back(s.ssim.reference(image.pixels.data(), image.width, image.height, image.channels));
   s.extent = compute_scene_extent(s.scene, s.split.train);
   s.rasterizer = render::make_cpu_rasterizer();
   s.rng_cameras = Rng::stream(s.cfg.seed, "cameras");
@@ -319,8 +322,11 @@ IterationRecord Trainer::step() {
   s.grad_rgb.assign(values, 0.0f);
   for (std::size_t i = 0; i < values; ++i) s.pred[i] = std::clamp(out.rgb[i], 0.0f, 1.0f);
   rec.l1 = l1_loss(s.pred.data(), gt.pixels.data(), values, s.grad_rgb.data(), 1.0f);
-  rec.ssim = s.ssim.evaluate(s.pred.data(), gt.pixels.data(), out.width, out.height, 3, s.grad_rgb.data(),
-                             -cfg.lambda_dssim);
+  const Ssim<float>::Reference& gt_stats = s.ssim_refs[static_cast<std::size_t>(view)];
+  if (gt_stats.width != out.width || gt_stats.height != out.height || gt_stats.channels != 3)
+    fail("iteration {}: the render ({}x{}) and training view {} ({}x{}x{}) differ in size", t, out.width, out.height,
+         view, gt_stats.width, gt_stats.height, gt_stats.channels);
+  rec.ssim = s.ssim.evaluate(s.pred.data(), gt_stats, s.grad_rgb.data(), -cfg.lambda_dssim);
   rec.loss = rec.l1 + cfg.lambda_dssim * (1.0 - rec.ssim);
   rec.terms = s.method->loss_terms(MethodLoss{method_step, s.pred.data(), gt, out.width, out.height, 3, s.grad_rgb.data()});
   for (const LossTerm& term : rec.terms) rec.loss += term.weight * term.value;
