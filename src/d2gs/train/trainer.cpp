@@ -3,7 +3,9 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
+#include <cstring>
 #include <fstream>
 #include <optional>
 #include <set>
@@ -42,6 +44,22 @@ float compute_scene_extent(const Scene& scene, const std::vector<int>& views) {
   for (int v : views) radius = std::max(radius, glm::length(scene.cameras[static_cast<std::size_t>(v)].center_world() - mean));
   if (!(radius > 0.0)) radius = 1.0;  // a single view: the original falls back likewise to a unit radius
   return static_cast<float>(1.1 * radius);
+}
+
+// Whether no value is NaN or infinite (exponent bits not all ones): a branch-free, vectorised and parallel
+// reduction over the bits, where a loop of std::isfinite with an early exit ran scalar (≈ 3 M values per
+// iteration at fern's model size).
+bool all_finite(const std::vector<float>& values) {
+  const float* v = values.data();
+  const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(values.size());
+  std::uint32_t bad = 0;
+#pragma omp parallel for simd reduction(| : bad) schedule(static) if (n > 65536)
+  for (std::ptrdiff_t i = 0; i < n; ++i) {
+    std::uint32_t bits;
+    std::memcpy(&bits, v + i, sizeof bits);
+    bad |= static_cast<std::uint32_t>((bits & 0x7f800000u) == 0x7f800000u);
+  }
+  return bad == 0;
 }
 
 }  // namespace
@@ -337,8 +355,7 @@ IterationRecord Trainer::step() {
   const auto& grads = s.rasterizer->backward(s.grad_rgb.data(), nullptr, nullptr);
   {
     const auto check = [&](const std::vector<float>& a, const char* name) {
-      for (float v : a)
-        if (!std::isfinite(v)) fail("iteration {}: non-finite gradient in {}; stopping", t, name);
+      if (!all_finite(a)) fail("iteration {}: non-finite gradient in {}; stopping", t, name);
     };
     check(grads.model.means, "means");
     check(grads.model.log_scales, "log_scales");
@@ -372,8 +389,7 @@ IterationRecord Trainer::step() {
     Adam::step(s.model, grads.model, s.adam, cfg.lr, means_lr, skip_opacity);
 
   for (const auto* a : {&s.model.means, &s.model.log_scales, &s.model.quats, &s.model.opacity_logits})
-    for (float v : *a)
-      if (!std::isfinite(v)) fail("iteration {}: a model parameter became non-finite; stopping", t);
+    if (!all_finite(*a)) fail("iteration {}: a model parameter became non-finite; stopping", t);
 
   rec.gaussians = s.model.size();
   rec.elapsed_s = s.elapsed();
