@@ -1,5 +1,6 @@
 #include "d2gs/eval/ssim.hpp"
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstddef>
@@ -24,12 +25,90 @@ std::array<T, kSsimWindow> gaussian_window() {
   return out;
 }
 
-// dst[x] += w * src[x] for x < n: the inner loop of both blur passes, multi-versioned for float.
+// Blur of one row: dst[x] = Σ_k w[k]·src[x + k − r] over the taps inside the row, summed in k order
+// starting from 0 — the operations of the former 11 axpy passes per row, so results are bit-identical
+// (with the same contraction into fused multiply-adds). The interior is one pass with the 11 taps in
+// registers instead of 11 read-modify-write passes over the row.
+template <typename T>
+D2GS_ALWAYS_INLINE void blur_row_body(T* __restrict dst, const T* __restrict src, const T* __restrict w, int W) {
+  constexpr int r = kSsimWindow / 2;
+  const int lo = std::min(r, W), hi = std::max(lo, W - r);
+  const auto edge = [&](int x) {
+    T acc = T(0);
+    for (int k = 0; k < kSsimWindow; ++k) {
+      const int xx = x + k - r;
+      if (xx >= 0 && xx < W) acc += w[k] * src[xx];
+    }
+    dst[x] = acc;
+  };
+  for (int x = 0; x < lo; ++x) edge(x);
+  for (int x = lo; x < hi; ++x) {
+    const T* s = src + x - r;
+    T acc = T(0);
+#pragma GCC unroll 16
+    for (int k = 0; k < kSsimWindow; ++k) acc += w[k] * s[k];
+    dst[x] = acc;
+  }
+  for (int x = hi; x < W; ++x) edge(x);
+}
+
+// Vertical pass of one output row with all 11 input rows inside the image: dst[x] = Σ_k w[k]·rows[k][x]
+// in k order from 0 (the former per-row axpy passes, bit-identical).
+template <typename T>
+D2GS_ALWAYS_INLINE void blur_column_body(T* __restrict dst, const T* __restrict in, std::size_t stride,
+                                          const T* __restrict w, int W) {
+  for (int x = 0; x < W; ++x) {
+    const T* s = in + x;
+    T acc = T(0);
+#pragma GCC unroll 16
+    for (int k = 0; k < kSsimWindow; ++k) acc += w[k] * s[static_cast<std::size_t>(k) * stride];
+    dst[x] = acc;
+  }
+}
+
+D2GS_VECTOR_CLONES void blur_row(float* __restrict dst, const float* __restrict src, const float* __restrict w, int W) {
+  blur_row_body(dst, src, w, W);
+}
+void blur_row(double* __restrict dst, const double* __restrict src, const double* __restrict w, int W) {
+  blur_row_body(dst, src, w, W);
+}
+D2GS_VECTOR_CLONES void blur_column(float* __restrict dst, const float* __restrict in, std::size_t stride,
+                                    const float* __restrict w, int W) {
+  blur_column_body(dst, in, stride, w, W);
+}
+void blur_column(double* __restrict dst, const double* __restrict in, std::size_t stride, const double* __restrict w,
+                 int W) {
+  blur_column_body(dst, in, stride, w, W);
+}
+
+// dst[x] += w * src[x] for x < n: the vertical pass at the top and bottom rows.
 D2GS_VECTOR_CLONES void axpy(float* __restrict dst, const float* __restrict src, float w, int n) {
   for (int x = 0; x < n; ++x) dst[x] += w * src[x];
 }
 void axpy(double* __restrict dst, const double* __restrict src, double w, int n) {
   for (int x = 0; x < n; ++x) dst[x] += w * src[x];
+}
+
+// One row of the SSIM map, and with Grad its local derivatives dS/dmu_a, dS/d<a²>, dS/d<ab> scaled by g
+// (for the mean and the caller's factor).
+template <typename T, bool Grad>
+void ssim_map_row(const T* __restrict mu_a, const T* __restrict mu_b, const T* __restrict s_aa,
+                  const T* __restrict s_bb, const T* __restrict s_ab, int width, T C1, T C2, T g, T* __restrict map,
+                  T* __restrict d_mu, T* __restrict d_saa, T* __restrict d_sab) {
+  for (int x = 0; x < width; ++x) {
+    const T ma = mu_a[x], mb = mu_b[x];
+    const T var_a = s_aa[x] - ma * ma, var_b = s_bb[x] - mb * mb, cov = s_ab[x] - ma * mb;
+    const T A1 = T(2) * ma * mb + C1, A2 = T(2) * cov + C2;
+    const T B1 = ma * ma + mb * mb + C1, B2 = var_a + var_b + C2;
+    const T inv_b = T(1) / (B1 * B2);
+    const T s = A1 * A2 * inv_b;
+    map[x] = s;
+    if constexpr (Grad) {
+      d_mu[x] = g * ((T(2) * mb * A2 - T(2) * mb * A1) * inv_b - s * (T(2) * ma / B1 - T(2) * ma / B2));
+      d_saa[x] = g * (-s / B2);
+      d_sab[x] = g * (T(2) * A1 * inv_b);
+    }
+  }
 }
 
 }  // namespace
@@ -40,9 +119,13 @@ void Ssim<T>::resize(int width, int height) {
   width_ = width;
   height_ = height;
   const std::size_t n = static_cast<std::size_t>(width) * height;
-  for (auto* v : {&a_, &b_, &mu_a_, &mu_b_, &s_aa_, &s_bb_, &s_ab_, &tmp_, &d_mu_, &d_saa_, &d_sab_, &acc_})
+  for (auto* v : {&a_, &b_, &mu_a_, &mu_b_, &s_aa_, &s_bb_, &s_ab_, &tmp_, &d_mu_, &d_saa_, &d_sab_, &acc_, &map_})
     v->assign(n, T(0));
-  row_.assign(static_cast<std::size_t>(width) + kSsimWindow, T(0));
+}
+
+template <typename T>
+void Ssim<T>::grow_row_sums(int height) {
+  if (row_sums_.size() < static_cast<std::size_t>(height)) row_sums_.resize(static_cast<std::size_t>(height));
 }
 
 // Zero-padded "same" separable filtering of one plane: horizontal pass into tmp_, vertical into out.
@@ -53,20 +136,15 @@ void Ssim<T>::blur(const T* in, T* out) {
   const int W = width_, H = height_;
   T* tmp = tmp_.data();
 #pragma omp parallel for schedule(static)
-  for (int y = 0; y < H; ++y) {
-    const T* src = in + static_cast<std::size_t>(y) * W;
-    T* dst = tmp + static_cast<std::size_t>(y) * W;
-    for (int x = 0; x < W; ++x) dst[x] = T(0);
-    for (int k = 0; k < kSsimWindow; ++k) {
-      const int shift = k - r;  // dst[x] += w[k] * src[x + shift]
-      const int x0 = shift < 0 ? -shift : 0;
-      const int x1 = shift > 0 ? W - shift : W;
-      axpy(dst + x0, src + x0 + shift, w[k], x1 - x0);
-    }
-  }
+  for (int y = 0; y < H; ++y)
+    blur_row(tmp + static_cast<std::size_t>(y) * W, in + static_cast<std::size_t>(y) * W, w.data(), W);
 #pragma omp parallel for schedule(static)
   for (int y = 0; y < H; ++y) {
     T* dst = out + static_cast<std::size_t>(y) * W;
+    if (y >= r && y + r < H) {
+      blur_column(dst, tmp + static_cast<std::size_t>(y - r) * W, static_cast<std::size_t>(W), w.data(), W);
+      continue;
+    }
     for (int x = 0; x < W; ++x) dst[x] = T(0);
     for (int k = 0; k < kSsimWindow; ++k) {
       const int yy = y + k - r;
@@ -77,53 +155,95 @@ void Ssim<T>::blur(const T* in, T* out) {
 }
 
 template <typename T>
+typename Ssim<T>::Reference Ssim<T>::reference(const T* b, int width, int height, int channels) {
+  if (width <= 0 || height <= 0 || channels <= 0) fail("SSIM: invalid image size {}x{}x{}", width, height, channels);
+  resize(width, height);
+  const std::size_t n = static_cast<std::size_t>(width) * height;
+  Reference ref;
+  ref.width = width;
+  ref.height = height;
+  ref.channels = channels;
+  for (auto* v : {&ref.b, &ref.mu_b, &ref.s_bb}) v->assign(n * static_cast<std::size_t>(channels), T(0));
+  for (int c = 0; c < channels; ++c) {
+    T* plane = ref.b.data() + n * static_cast<std::size_t>(c);
+    for (std::size_t i = 0; i < n; ++i) plane[i] = b[i * channels + c];
+    for (std::size_t i = 0; i < n; ++i) acc_[i] = plane[i] * plane[i];
+    blur(acc_.data(), ref.s_bb.data() + n * static_cast<std::size_t>(c));
+    blur(plane, ref.mu_b.data() + n * static_cast<std::size_t>(c));
+  }
+  return ref;
+}
+
+template <typename T>
 T Ssim<T>::evaluate(const T* a, const T* b, int width, int height, int channels, T* grad_a, T grad_scale) {
   if (width <= 0 || height <= 0 || channels <= 0) fail("SSIM: invalid image size {}x{}x{}", width, height, channels);
   resize(width, height);
   const std::size_t n = static_cast<std::size_t>(width) * height;
+  return run(a, width, height, channels, grad_a, grad_scale, [&](int c) {
+    for (std::size_t i = 0; i < n; ++i) b_[i] = b[i * channels + c];
+    for (std::size_t i = 0; i < n; ++i) acc_[i] = b_[i] * b_[i];
+    blur(acc_.data(), s_bb_.data());
+    blur(b_.data(), mu_b_.data());
+    return Planes{b_.data(), mu_b_.data(), s_bb_.data()};
+  });
+}
+
+template <typename T>
+T Ssim<T>::evaluate(const T* a, const Reference& ref, T* grad_a, T grad_scale) {
+  if (ref.width <= 0 || ref.height <= 0 || ref.channels <= 0 ||
+      ref.b.size() != static_cast<std::size_t>(ref.width) * ref.height * ref.channels)
+    fail("SSIM: invalid reference image");
+  resize(ref.width, ref.height);
+  const std::size_t n = static_cast<std::size_t>(ref.width) * ref.height;
+  return run(a, ref.width, ref.height, ref.channels, grad_a, grad_scale, [&](int c) {
+    const std::size_t at = n * static_cast<std::size_t>(c);
+    return Planes{ref.b.data() + at, ref.mu_b.data() + at, ref.s_bb.data() + at};
+  });
+}
+
+template <typename T>
+template <typename ChannelOfB>
+T Ssim<T>::run(const T* a, int width, int height, int channels, T* grad_a, T grad_scale, ChannelOfB&& channel_of_b) {
+  const std::size_t n = static_cast<std::size_t>(width) * height;
   const T C1 = static_cast<T>(kSsimC1), C2 = static_cast<T>(kSsimC2);
   const double inv_count = 1.0 / (static_cast<double>(n) * channels);
   double total = 0.0;
+  grow_row_sums(height);
   for (int c = 0; c < channels; ++c) {
-    // De-interleave the channel and form the products.
-    for (std::size_t i = 0; i < n; ++i) {
-      a_[i] = a[i * channels + c];
-      b_[i] = b[i * channels + c];
-    }
+    // The second image's plane, local mean and local second moment; de-interleave the first and form the
+    // products.
+    const Planes pb = channel_of_b(c);
+    const T* bp = pb.b;
+    const T* mu_b = pb.mu;
+    const T* s_bb = pb.s;
+    for (std::size_t i = 0; i < n; ++i) a_[i] = a[i * channels + c];
     for (std::size_t i = 0; i < n; ++i) acc_[i] = a_[i] * a_[i];
     blur(acc_.data(), s_aa_.data());
-    for (std::size_t i = 0; i < n; ++i) acc_[i] = b_[i] * b_[i];
-    blur(acc_.data(), s_bb_.data());
-    for (std::size_t i = 0; i < n; ++i) acc_[i] = a_[i] * b_[i];
+    for (std::size_t i = 0; i < n; ++i) acc_[i] = a_[i] * bp[i];
     blur(acc_.data(), s_ab_.data());
     blur(a_.data(), mu_a_.data());
-    blur(b_.data(), mu_b_.data());
 
-    // SSIM map, its row sums (fixed order: deterministic), and the local derivatives.
-    std::vector<double> row_sums(static_cast<std::size_t>(height), 0.0);
+    // SSIM map and the local derivatives (one vectorisable pass per row: the double row sum in pixel
+    // order is a second pass, so that it does not keep the map's arithmetic scalar), and the map's row
+    // sums (fixed order: deterministic).
+    double* row_sums = row_sums_.data();
     const T g = static_cast<T>(grad_scale * static_cast<T>(inv_count));
+    T* map = map_.data();
 #pragma omp parallel for schedule(static)
     for (int y = 0; y < height; ++y) {
+      const std::size_t row = static_cast<std::size_t>(y) * width;
+      if (grad_a)
+        ssim_map_row<T, true>(mu_a_.data() + row, mu_b + row, s_aa_.data() + row, s_bb + row, s_ab_.data() + row,
+                              width, C1, C2, g, map + row, d_mu_.data() + row, d_saa_.data() + row,
+                              d_sab_.data() + row);
+      else
+        ssim_map_row<T, false>(mu_a_.data() + row, mu_b + row, s_aa_.data() + row, s_bb + row, s_ab_.data() + row,
+                               width, C1, C2, g, map + row, nullptr, nullptr, nullptr);
       double row_sum = 0.0;
-      for (int x = 0; x < width; ++x) {
-        const std::size_t i = static_cast<std::size_t>(y) * width + x;
-        const T ma = mu_a_[i], mb = mu_b_[i];
-        const T var_a = s_aa_[i] - ma * ma, var_b = s_bb_[i] - mb * mb, cov = s_ab_[i] - ma * mb;
-        const T A1 = T(2) * ma * mb + C1, A2 = T(2) * cov + C2;
-        const T B1 = ma * ma + mb * mb + C1, B2 = var_a + var_b + C2;
-        const T inv_b = T(1) / (B1 * B2);
-        const T s = A1 * A2 * inv_b;
-        row_sum += static_cast<double>(s);
-        if (grad_a) {
-          // dS/dmu_a, dS/d<a²>, dS/d<ab> (local means), scaled for the mean and the caller's factor.
-          d_mu_[i] = g * ((T(2) * mb * A2 - T(2) * mb * A1) * inv_b - s * (T(2) * ma / B1 - T(2) * ma / B2));
-          d_saa_[i] = g * (-s / B2);
-          d_sab_[i] = g * (T(2) * A1 * inv_b);
-        }
-      }
-      row_sums[static_cast<std::size_t>(y)] = row_sum;
+      for (int x = 0; x < width; ++x) row_sum += static_cast<double>(map[row + static_cast<std::size_t>(x)]);
+      row_sums[y] = row_sum;
     }
-    for (double r : row_sums) total += r;
+    for (int y = 0; y < height; ++y) total += row_sums[y];
 
     if (grad_a) {
       // grad_a = G*(dS/dmu_a) + 2a·G*(dS/d<a²>) + b·G*(dS/d<ab>)   (G self-adjoint)
@@ -131,7 +251,7 @@ T Ssim<T>::evaluate(const T* a, const T* b, int width, int height, int channels,
       blur(d_saa_.data(), s_aa_.data());
       blur(d_sab_.data(), s_ab_.data());
       for (std::size_t i = 0; i < n; ++i)
-        grad_a[i * channels + c] = mu_a_[i] + T(2) * a_[i] * s_aa_[i] + b_[i] * s_ab_[i];
+        grad_a[i * channels + c] = mu_a_[i] + T(2) * a_[i] * s_aa_[i] + bp[i] * s_ab_[i];
     }
   }
   return static_cast<T>(total * inv_count);

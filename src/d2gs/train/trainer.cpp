@@ -3,7 +3,9 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
+#include <cstring>
 #include <fstream>
 #include <optional>
 #include <set>
@@ -44,6 +46,22 @@ float compute_scene_extent(const Scene& scene, const std::vector<int>& views) {
   return static_cast<float>(1.1 * radius);
 }
 
+// Whether no value is NaN or infinite (exponent bits not all ones): a branch-free, vectorised and parallel
+// reduction over the bits, where a loop of std::isfinite with an early exit ran scalar (≈ 3 M values per
+// iteration at fern's model size).
+bool all_finite(const std::vector<float>& values) {
+  const float* v = values.data();
+  const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(values.size());
+  std::uint32_t bad = 0;
+#pragma omp parallel for simd reduction(| : bad) schedule(static) if (n > 65536)
+  for (std::ptrdiff_t i = 0; i < n; ++i) {
+    std::uint32_t bits;
+    std::memcpy(&bits, v + i, sizeof bits);
+    bad |= static_cast<std::uint32_t>((bits & 0x7f800000u) == 0x7f800000u);
+  }
+  return bad == 0;
+}
+
 }  // namespace
 
 struct Trainer::State {
@@ -62,6 +80,7 @@ struct Trainer::State {
   GradientStats stats;
   std::unique_ptr<render::Rasterizer> rasterizer;
   Ssim<float> ssim;
+  std::vector<Ssim<float>::Reference> ssim_refs;  // by position in split.train: the images' local statistics
   int iteration = 0;
   int active_sh = 0;
   Rng rng_cameras, rng_dropout, rng_densify;
@@ -212,6 +231,8 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
     s.train_images.push_back(load_image(s.scene, v));
     s.train_cameras.push_back(render::make_render_camera(s.scene.cameras[static_cast<std::size_t>(v)]));
   }
+  for (const Image& image : s.train_images)
+    s.ssim_refs.push_back(s.ssim.reference(image.pixels.data(), image.width, image.height, image.channels));
   s.extent = compute_scene_extent(s.scene, s.split.train);
   s.rasterizer = render::make_cpu_rasterizer();
   s.rng_cameras = Rng::stream(s.cfg.seed, "cameras");
@@ -319,8 +340,11 @@ IterationRecord Trainer::step() {
   s.grad_rgb.assign(values, 0.0f);
   for (std::size_t i = 0; i < values; ++i) s.pred[i] = std::clamp(out.rgb[i], 0.0f, 1.0f);
   rec.l1 = l1_loss(s.pred.data(), gt.pixels.data(), values, s.grad_rgb.data(), 1.0f);
-  rec.ssim = s.ssim.evaluate(s.pred.data(), gt.pixels.data(), out.width, out.height, 3, s.grad_rgb.data(),
-                             -cfg.lambda_dssim);
+  const Ssim<float>::Reference& gt_stats = s.ssim_refs[static_cast<std::size_t>(view)];
+  if (gt_stats.width != out.width || gt_stats.height != out.height || gt_stats.channels != 3)
+    fail("iteration {}: the render ({}x{}) and training view {} ({}x{}x{}) differ in size", t, out.width, out.height,
+         view, gt_stats.width, gt_stats.height, gt_stats.channels);
+  rec.ssim = s.ssim.evaluate(s.pred.data(), gt_stats, s.grad_rgb.data(), -cfg.lambda_dssim);
   rec.loss = rec.l1 + cfg.lambda_dssim * (1.0 - rec.ssim);
   rec.terms = s.method->loss_terms(MethodLoss{method_step, s.pred.data(), gt, out.width, out.height, 3, s.grad_rgb.data()});
   for (const LossTerm& term : rec.terms) rec.loss += term.weight * term.value;
@@ -331,8 +355,7 @@ IterationRecord Trainer::step() {
   const auto& grads = s.rasterizer->backward(s.grad_rgb.data(), nullptr, nullptr);
   {
     const auto check = [&](const std::vector<float>& a, const char* name) {
-      for (float v : a)
-        if (!std::isfinite(v)) fail("iteration {}: non-finite gradient in {}; stopping", t, name);
+      if (!all_finite(a)) fail("iteration {}: non-finite gradient in {}; stopping", t, name);
     };
     check(grads.model.means, "means");
     check(grads.model.log_scales, "log_scales");
@@ -369,8 +392,7 @@ IterationRecord Trainer::step() {
     Adam::step(s.model, grads.model, s.adam, cfg.lr, means_lr, skip_opacity);
 
   for (const auto* a : {&s.model.means, &s.model.log_scales, &s.model.quats, &s.model.opacity_logits})
-    for (float v : *a)
-      if (!std::isfinite(v)) fail("iteration {}: a model parameter became non-finite; stopping", t);
+    if (!all_finite(*a)) fail("iteration {}: a model parameter became non-finite; stopping", t);
 
   rec.gaussians = s.model.size();
   rec.elapsed_s = s.elapsed();
