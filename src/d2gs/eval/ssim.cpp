@@ -119,13 +119,8 @@ void Ssim<T>::resize(int width, int height) {
   width_ = width;
   height_ = height;
   const std::size_t n = static_cast<std::size_t>(width) * height;
-  for (auto* v : {&a_, &b_, &mu_a_, &mu_b_, &s_aa_, &s_bb_, &s_ab_, &tmp_, &d_mu_, &d_saa_, &d_sab_, &acc_, &map_})
-    v->assign(n, T(0));
-}
-
-template <typename T>
-void Ssim<T>::grow_row_sums(int height) {
-  if (row_sums_.size() < static_cast<std::size_t>(height)) row_sums_.resize(static_cast<std::size_t>(height));
+  for (auto* v : {&a_, &mu_a_, &s_aa_, &s_ab_, &tmp_, &d_mu_, &d_saa_, &d_sab_, &acc_, &map_}) v->assign(n, T(0));
+  row_sums_.assign(static_cast<std::size_t>(height), 0.0);
 }
 
 // Zero-padded "same" separable filtering of one plane: horizontal pass into tmp_, vertical into out.
@@ -176,16 +171,7 @@ typename Ssim<T>::Reference Ssim<T>::reference(const T* b, int width, int height
 
 template <typename T>
 T Ssim<T>::evaluate(const T* a, const T* b, int width, int height, int channels, T* grad_a, T grad_scale) {
-  if (width <= 0 || height <= 0 || channels <= 0) fail("SSIM: invalid image size {}x{}x{}", width, height, channels);
-  resize(width, height);
-  const std::size_t n = static_cast<std::size_t>(width) * height;
-  return run(a, width, height, channels, grad_a, grad_scale, [&](int c) {
-    for (std::size_t i = 0; i < n; ++i) b_[i] = b[i * channels + c];
-    for (std::size_t i = 0; i < n; ++i) acc_[i] = b_[i] * b_[i];
-    blur(acc_.data(), s_bb_.data());
-    blur(b_.data(), mu_b_.data());
-    return Planes{b_.data(), mu_b_.data(), s_bb_.data()};
-  });
+  return evaluate(a, reference(b, width, height, channels), grad_a, grad_scale);
 }
 
 template <typename T>
@@ -193,29 +179,19 @@ T Ssim<T>::evaluate(const T* a, const Reference& ref, T* grad_a, T grad_scale) {
   if (ref.width <= 0 || ref.height <= 0 || ref.channels <= 0 ||
       ref.b.size() != static_cast<std::size_t>(ref.width) * ref.height * ref.channels)
     fail("SSIM: invalid reference image");
-  resize(ref.width, ref.height);
-  const std::size_t n = static_cast<std::size_t>(ref.width) * ref.height;
-  return run(a, ref.width, ref.height, ref.channels, grad_a, grad_scale, [&](int c) {
-    const std::size_t at = n * static_cast<std::size_t>(c);
-    return Planes{ref.b.data() + at, ref.mu_b.data() + at, ref.s_bb.data() + at};
-  });
-}
-
-template <typename T>
-template <typename ChannelOfB>
-T Ssim<T>::run(const T* a, int width, int height, int channels, T* grad_a, T grad_scale, ChannelOfB&& channel_of_b) {
+  const int width = ref.width, height = ref.height, channels = ref.channels;
+  resize(width, height);
   const std::size_t n = static_cast<std::size_t>(width) * height;
   const T C1 = static_cast<T>(kSsimC1), C2 = static_cast<T>(kSsimC2);
   const double inv_count = 1.0 / (static_cast<double>(n) * channels);
   double total = 0.0;
-  grow_row_sums(height);
   for (int c = 0; c < channels; ++c) {
     // The second image's plane, local mean and local second moment; de-interleave the first and form the
     // products.
-    const Planes pb = channel_of_b(c);
-    const T* bp = pb.b;
-    const T* mu_b = pb.mu;
-    const T* s_bb = pb.s;
+    const std::size_t at = n * static_cast<std::size_t>(c);
+    const T* bp = ref.b.data() + at;
+    const T* mu_b = ref.mu_b.data() + at;
+    const T* s_bb = ref.s_bb.data() + at;
     for (std::size_t i = 0; i < n; ++i) a_[i] = a[i * channels + c];
     for (std::size_t i = 0; i < n; ++i) acc_[i] = a_[i] * a_[i];
     blur(acc_.data(), s_aa_.data());

@@ -31,20 +31,14 @@ public:
   // scaled by `grad_scale` (e.g. −0.2 for the loss term 0.2·(1 − SSIM)).
   T evaluate(const T* a, const T* b, int width, int height, int channels, T* grad_a = nullptr,
              T grad_scale = T(1));
-  // The same against a precomputed reference(b, ...).
+  // The same against a precomputed reference(b, ...) (evaluate(a, b, ...) is this with reference(b, ...)).
   T evaluate(const T* a, const Reference& b, T* grad_a = nullptr, T grad_scale = T(1));
 
 private:
-  struct Planes {
-    const T *b, *mu, *s;  // one channel of the second image, its local mean and local second moment
-  };
-  template <typename ChannelOfB>
-  T run(const T* a, int width, int height, int channels, T* grad_a, T grad_scale, ChannelOfB&& channel_of_b);
   void resize(int width, int height);
-  void grow_row_sums(int height);
   void blur(const T* in, T* out);  // planar, one channel
   int width_ = 0, height_ = 0;
-  std::vector<T> a_, b_, mu_a_, mu_b_, s_aa_, s_bb_, s_ab_, tmp_, d_mu_, d_saa_, d_sab_, acc_, map_;
+  std::vector<T> a_, mu_a_, s_aa_, s_ab_, tmp_, d_mu_, d_saa_, d_sab_, acc_, map_;
   std::vector<double> row_sums_;
 };
 
