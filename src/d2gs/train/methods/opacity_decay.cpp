@@ -5,6 +5,7 @@
 // (--opacity-reset-at none there) and densifies to the end.
 #include <cmath>
 
+#include "d2gs/render/activations.hpp"
 #include "d2gs/train/methods/method.hpp"
 
 namespace d2gs {
@@ -19,8 +20,7 @@ public:
     if (iteration <= from_ || factor_ == 1.0) return;
     const double log_factor = std::log(factor_);
     for (float& l : model.opacity_logits) {
-      const double o = 1.0 / (1.0 + std::exp(-static_cast<double>(l)));
-      const double d = factor_ * o;
+      const double d = factor_ * sigmoid(static_cast<double>(l));
       // logit(f·o); for an opacity that underflows, its limit l + log f.
       l = static_cast<float>(d > 0.0 ? std::log(d) - std::log1p(-d) : l + log_factor);
     }
