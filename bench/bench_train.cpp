@@ -1,5 +1,6 @@
-// Training-iteration cost on real data: fern, 3 views, 504×378, the all-view SfM init (10 091 points),
-// for each method. Reported per iteration (render, loss, backward, densification statistics, Adam).
+// Training-iteration cost on real data: fern, 3 views, 504×378, from the published pipeline's 3-view cloud
+// (../shared/data/published_init/fern, 17 903 points: the start of issue 26's reference run; a file, so no
+// stereo is built per benchmark), for each method. Reported per iteration (render, loss, backward, densification statistics, Adam).
 // And DD-Drop's own parts (method.md §4): the kNN density refresh (t = 1 and every 500 iterations) and
 // the per-iteration mask (depths, tertile layers, probabilities, Bernoulli draws), on N Gaussians drawn
 // around fern's SfM points (a point picked at random, jittered by 0.3 % of the cloud's box diagonal:
@@ -73,6 +74,7 @@ void BM_TrainIteration(benchmark::State& state) {
   c.model_dir = dir.string();
   c.resolution = 8;
   c.n_views = 3;
+  c.init = std::string(D2GS_SHARED_DATA_DIR) + "/published_init/fern/3_views_fused.ply";
   c.method = method;
   state.SetLabel(method);
   c.quiet = true;
