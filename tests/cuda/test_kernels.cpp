@@ -302,6 +302,34 @@ TEST(EmulatedKernels, RandomScenesEqualTheCpuStagesBitForBit) {
     }
 }
 
+// Two small Gaussians, each in one tile of its own (the first and the last touched tile hold a single
+// intersection: the ends of the tile ranges).
+TEST(EmulatedKernels, TilesOfOneGaussianEach) {
+  render::CameraParams<float> cam;
+  cam.width = 64;
+  cam.height = 48;
+  cam.fx = cam.fy = 50.0f;
+  cam.cx = 32.0f;
+  cam.cy = 24.0f;
+  render::set_jacobian_limits(cam);
+  TestModel<float> m;
+  m.sh_degree = 0;
+  m.means = {-0.4f, -0.3f, 1.0f, 0.4f, 0.3f, 1.0f};
+  m.log_scales.assign(6, std::log(0.001f));
+  m.quats = {1, 0, 0, 0, 1, 0, 0, 0};
+  m.opacity_logits = {0.0f, 0.0f};
+  m.sh_dc = {0.1f, 0.2f, 0.3f, 0.3f, 0.2f, 0.1f};
+  m.multiplier = {1.0f, 1.0f};
+  for (auto& runner : emulated_runners()) {
+    expect_bitwise(*runner, m, cam, StageOptions{}, false, "two Gaussians");
+    const auto& f = runner->forward(m.view(), nullptr, cam, StageOptions{});
+    EXPECT_EQ(f.tile_counts, (std::vector<int>{1, 1}));
+    EXPECT_EQ(f.tile_ranges, (std::vector<int>{0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0,  // tiles 0-5
+                                                0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 2}));  // tiles 6-11
+    EXPECT_EQ(f.isect_gaussians, (std::vector<int>{0, 1}));
+  }
+}
+
 TEST(EmulatedKernels, FernEqualsTheCpuStagesBitForBit) {
   const FernCase fern = load_fern_case();
   ASSERT_GT(fern.model.size(), 1000u);
