@@ -108,7 +108,7 @@ TEST(KernelEmulator, AtomicsAreAddsInThreadOrder) {
   EXPECT_EQ(counter, 128);
   for (int i = 0; i < 128; ++i) EXPECT_EQ(old[i], i);
   counter = 0;
-  emulate::launch<AtomicKernel>(Dim{2, 1}, Dim{64, 1}, AtomicArgs{&counter, old.data()}, emulate::Order::Reverse);
+  emulate::launch<AtomicKernel>(Dim{2, 1}, Dim{64, 1}, AtomicArgs{&counter, old.data()}, emulate::Schedule::Reverse);
   for (int i = 0; i < 128; ++i) EXPECT_EQ(old[i], 127 - i);
 }
 
@@ -136,8 +136,62 @@ struct RaceKernel {
 TEST(KernelEmulator, ThreadOrdersExposeARaceWithinAPhase) {
   std::vector<int> forward(64), reverse(64);
   emulate::launch<RaceKernel>(Dim{1, 1}, Dim{64, 1}, RaceArgs{forward.data()});
-  emulate::launch<RaceKernel>(Dim{1, 1}, Dim{64, 1}, RaceArgs{reverse.data()}, emulate::Order::Reverse);
+  emulate::launch<RaceKernel>(Dim{1, 1}, Dim{64, 1}, RaceArgs{reverse.data()}, emulate::Schedule::Reverse);
   EXPECT_NE(forward, reverse);
+}
+
+// Thread t writes its slot, and after the barrier (or, wrongly, without it) reads its neighbour's.
+struct NeighbourArgs {
+  bool with_sync = true;
+  int* out = nullptr;
+};
+struct NeighbourKernel {
+  struct Shared {
+    int values[64];
+  };
+  template <class Block>
+  static void run(Block& b, Shared& sh, const NeighbourArgs& a) {
+    b.threads([&](const Thread& t) { sh.values[t.linear()] = 10 * t.linear(); });
+    if (a.with_sync) b.sync();
+    b.threads([&](const Thread& t) { a.out[t.linear()] = sh.values[(t.linear() + 1) % 64]; });
+  }
+};
+
+TEST(KernelEmulator, SyncVisibilityExposesAMissingSync) {
+  std::vector<int> expected(64);
+  for (int t = 0; t < 64; ++t) expected[t] = 10 * ((t + 1) % 64);
+  for (bool with_sync : {true, false}) {
+    std::vector<int> forward(64), visible_at_sync(64);
+    emulate::launch<NeighbourKernel>(Dim{1, 1}, Dim{64, 1}, NeighbourArgs{with_sync, forward.data()});
+    emulate::launch<NeighbourKernel>(Dim{1, 1}, Dim{64, 1}, NeighbourArgs{with_sync, visible_at_sync.data()},
+                                     emulate::Schedule::SyncVisibility);
+    EXPECT_EQ(forward, expected);  // the plain schedule cannot tell
+    if (with_sync) {
+      EXPECT_EQ(visible_at_sync, expected);
+    } else {
+      EXPECT_EQ(visible_at_sync, std::vector<int>(64, -1));  // the poisoned memory of the last sync
+    }
+  }
+}
+
+struct ConflictArgs {
+  int unused = 0;
+};
+struct ConflictKernel {
+  struct Shared {
+    int value;
+  };
+  template <class Block>
+  static void run(Block& b, Shared& sh, const ConflictArgs&) {
+    b.threads([&](const Thread& t) { sh.value = t.linear(); });
+    b.sync();
+  }
+};
+
+TEST(KernelEmulator, SyncVisibilityReportsTwoThreadsWritingOneByte) {
+  EXPECT_NO_THROW(emulate::launch<ConflictKernel>(Dim{1, 1}, Dim{32, 1}, ConflictArgs{}));
+  EXPECT_THROW(emulate::launch<ConflictKernel>(Dim{1, 1}, Dim{32, 1}, ConflictArgs{}, emulate::Schedule::SyncVisibility),
+               Error);
 }
 
 TEST(KernelEmulator, SortIsStableOnTheKeyBits) {
@@ -155,8 +209,8 @@ TEST(KernelEmulator, SortIsStableOnTheKeyBits) {
 
 std::vector<std::unique_ptr<StageRunner>> emulated_runners() {
   std::vector<std::unique_ptr<StageRunner>> r;
-  r.push_back(render::kernels::make_emulated_stages(emulate::Order::Forward));
-  r.push_back(render::kernels::make_emulated_stages(emulate::Order::Reverse));
+  for (auto s : {emulate::Schedule::Forward, emulate::Schedule::Reverse, emulate::Schedule::SyncVisibility})
+    r.push_back(render::kernels::make_emulated_stages(s));
   return r;
 }
 

@@ -5,8 +5,14 @@
 // poisoned the same way; warp shuffles take their value from CUDA's definition of the source lane;
 // atomics are plain adds in thread order; the device radix sort is a stable sort of the same keys.
 //
-// Order::Reverse runs blocks and the threads of every phase backwards: a kernel whose result depends on
-// the order of threads within a phase (a race on the GPU) gives a different answer in the two orders.
+// Schedules (the same results are expected from each; tests run them all):
+//  - Forward: blocks and the threads of every phase in index order;
+//  - Reverse: both backwards, so a result that depends on the order of threads within a phase (a race
+//    on the GPU) differs from Forward's;
+//  - SyncVisibility: index order, but a thread sees the shared-memory writes of other threads only after
+//    a b.sync(): until then it reads the contents at the last sync plus its own writes. A missing
+//    __syncthreads() between a write and another thread's read then reads stale (poisoned) memory, and
+//    two threads writing different values to one byte between syncs is reported as a race (d2gs::Error).
 #include <algorithm>
 #include <cstdint>
 #include <cstring>
@@ -20,7 +26,7 @@
 
 namespace d2gs::render::kernels::emulate {
 
-enum class Order { Forward, Reverse };
+enum class Schedule { Forward, Reverse, SyncVisibility };
 
 template <class T>
 class Reg {
@@ -43,9 +49,18 @@ private:
 
 class HostBlock {
 public:
-  HostBlock(Dim grid, Dim block, Dim index, Order order) : grid_(grid), block_(block), index_(index), order_(order) {
+  // `shared`: the block's shared memory (shared_bytes), watched under Schedule::SyncVisibility.
+  HostBlock(Dim grid, Dim block, Dim index, Schedule schedule, void* shared = nullptr, std::size_t shared_bytes = 0)
+      : grid_(grid), block_(block), index_(index), schedule_(schedule),
+        shared_(static_cast<unsigned char*>(shared)), shared_bytes_(shared ? shared_bytes : 0) {
     if (block.x * block.y % kWarpSize != 0)
       fail("kernel emulation: a block of {}x{} threads is not whole warps", block.x, block.y);
+    if (schedule_ == Schedule::SyncVisibility && shared_bytes_ > 0) {
+      const std::size_t n = static_cast<std::size_t>(threads_per_block());
+      views_.assign(n * shared_bytes_, 0);
+      written_.assign(n * shared_bytes_, 0);
+      start_segment();
+    }
   }
 
   Dim grid_dim() const { return grid_; }
@@ -55,10 +70,31 @@ public:
   template <class F>
   void threads(F&& f) {
     const int n = threads_per_block();
-    for (int k = 0; k < n; ++k) f(thread(order_ == Order::Forward ? k : n - 1 - k));
+    if (views_.empty()) {
+      for (int k = 0; k < n; ++k) f(thread(schedule_ == Schedule::Reverse ? n - 1 - k : k));
+      return;
+    }
+    // SyncVisibility: each thread runs on its own view of shared memory (the last sync's contents and
+    // its own writes since); the views are merged into the block's shared memory after the phase.
+    for (int k = 0; k < n; ++k) {
+      unsigned char* view = &views_[static_cast<std::size_t>(k) * shared_bytes_];
+      unsigned char* written = &written_[static_cast<std::size_t>(k) * shared_bytes_];
+      std::memcpy(shared_, view, shared_bytes_);
+      f(thread(k));
+      for (std::size_t i = 0; i < shared_bytes_; ++i)
+        if (shared_[i] != view[i]) {
+          view[i] = shared_[i];
+          written[i] = 1;
+        }
+    }
+    merge();
   }
-  // __syncthreads(): every phase has already run to its end for every thread.
-  void sync() { ++syncs_; }
+  // __syncthreads(): every phase has already run to its end for every thread; under SyncVisibility the
+  // threads' writes become visible to all.
+  void sync() {
+    ++syncs_;
+    if (!views_.empty()) start_segment();
+  }
   int syncs() const { return syncs_; }
 
   template <class T>
@@ -112,23 +148,54 @@ private:
     }
   }
 
+  // The block's shared memory = the last sync's contents with every thread's writes since; a byte written
+  // by two threads with different values is a race.
+  void merge() {
+    std::memcpy(shared_, base_.data(), shared_bytes_);
+    std::vector<int> writer(shared_bytes_, -1);
+    const int n = threads_per_block();
+    for (int k = 0; k < n; ++k) {
+      const unsigned char* view = &views_[static_cast<std::size_t>(k) * shared_bytes_];
+      const unsigned char* written = &written_[static_cast<std::size_t>(k) * shared_bytes_];
+      for (std::size_t i = 0; i < shared_bytes_; ++i) {
+        if (!written[i]) continue;
+        if (writer[i] >= 0 && shared_[i] != view[i])
+          fail("kernel emulation: threads {} and {} of block ({}, {}) write different values to shared byte {} "
+               "between two __syncthreads()",
+               writer[i], k, index_.x, index_.y, i);
+        writer[i] = k;
+        shared_[i] = view[i];
+      }
+    }
+  }
+  void start_segment() {
+    base_.assign(shared_, shared_ + shared_bytes_);
+    const std::size_t n = static_cast<std::size_t>(threads_per_block());
+    for (std::size_t k = 0; k < n; ++k) std::memcpy(&views_[k * shared_bytes_], base_.data(), shared_bytes_);
+    std::fill(written_.begin(), written_.end(), 0);
+  }
+
   Dim grid_, block_, index_;
-  Order order_;
+  Schedule schedule_;
+  unsigned char* shared_ = nullptr;
+  std::size_t shared_bytes_ = 0;
+  std::vector<unsigned char> base_, views_, written_;
   int syncs_ = 0;
 };
 
 // Runs Body over a grid of blocks: the emulated kernel<<<grid, block>>>(args).
 template <class Body, class Args>
-void launch(Dim grid, Dim block, const Args& args, Order order = Order::Forward) {
+void launch(Dim grid, Dim block, const Args& args, Schedule schedule = Schedule::Forward) {
   using Shared = typename Body::Shared;
   static_assert(std::is_trivially_copyable_v<Shared> && std::is_trivially_default_constructible_v<Shared>,
                 "__shared__ memory must be a plain struct");
   const int blocks = grid.x * grid.y;
   for (int k = 0; k < blocks; ++k) {
-    const int b = order == Order::Forward ? k : blocks - 1 - k;
+    const int b = schedule == Schedule::Reverse ? blocks - 1 - k : k;
     Shared shared;
     std::memset(static_cast<void*>(&shared), 0xff, sizeof shared);
-    HostBlock host_block(grid, block, Dim{b % grid.x, b / grid.x}, order);
+    HostBlock host_block(grid, block, Dim{b % grid.x, b / grid.x}, schedule,
+                         std::is_empty_v<Shared> ? nullptr : static_cast<void*>(&shared), sizeof shared);
     Body::run(host_block, shared, args);
   }
 }

@@ -6,9 +6,11 @@
 
 namespace d2gs::render::kernels {
 
-std::unique_ptr<StageRunner> make_emulated_stages(emulate::Order order) {
-  return std::make_unique<StagePipeline<emulate::HostBackend>>(
-      order == emulate::Order::Forward ? "emulated" : "emulated (reverse order)", emulate::HostBackend{order});
+std::unique_ptr<StageRunner> make_emulated_stages(emulate::Schedule schedule) {
+  const char* name = schedule == emulate::Schedule::Forward   ? "emulated"
+                     : schedule == emulate::Schedule::Reverse ? "emulated, reverse order"
+                                                              : "emulated, shared memory visible at syncs";
+  return std::make_unique<StagePipeline<emulate::HostBackend>>(name, emulate::HostBackend{schedule});
 }
 
 }  // namespace d2gs::render::kernels

@@ -28,7 +28,7 @@ private:
 };
 
 struct HostBackend {
-  emulate::Order order = emulate::Order::Forward;
+  Schedule schedule = Schedule::Forward;
 
   template <class T>
   using Array = HostArray<T>;
@@ -36,7 +36,7 @@ struct HostBackend {
   template <class Body, class Args>
   void launch(int blocks, int threads, const Args& args) {
     if (blocks <= 0) return;
-    emulate::launch<Body>(Dim{blocks, 1}, Dim{threads, 1}, args, order);
+    emulate::launch<Body>(Dim{blocks, 1}, Dim{threads, 1}, args, schedule);
   }
   template <class T>
   void upload(Array<T>& dst, const T* src, std::size_t n) {

@@ -64,6 +64,6 @@ public:
 };
 
 // The kernels run on the CPU by the emulator (kernels/emulate.hpp).
-std::unique_ptr<StageRunner> make_emulated_stages(emulate::Order order = emulate::Order::Forward);
+std::unique_ptr<StageRunner> make_emulated_stages(emulate::Schedule schedule = emulate::Schedule::Forward);
 
 }  // namespace d2gs::render::kernels
