@@ -40,8 +40,11 @@ void expect_bit_equal(const Gaussians& a, const Gaussians& b, const char* what) 
   EXPECT_TRUE(bit_equal(a.sh_rest, b.sh_rest)) << what << " sh_rest";
 }
 
-using AdamStep = void (*)(Gaussians&, const Gaussians&, AdamState&, const LearningRates&, float, bool);
+namespace emulate = render::kernels::emulate;
+constexpr emulate::Schedule kSchedules[] = {emulate::Schedule::Forward, emulate::Schedule::Reverse,
+                                            emulate::Schedule::SyncVisibility};
 
+template <class AdamStep>
 void expect_adam_equal(AdamStep kernel_step) {
   const std::size_t n = 5000;
   Gaussians cpu = random_gaussians(n, 1, 1.0f), gpu = cpu;
@@ -60,8 +63,7 @@ void expect_adam_equal(AdamStep kernel_step) {
   }
 }
 
-using L1 = double (*)(const float*, const float*, std::size_t, float*, float);
-
+template <class L1>
 void expect_l1_equal(L1 kernel_l1) {
   for (std::size_t count : {std::size_t{1}, std::size_t{255}, std::size_t{504 * 378 * 3}}) {
     std::mt19937 rng(static_cast<unsigned>(count));
@@ -82,8 +84,19 @@ void expect_l1_equal(L1 kernel_l1) {
   EXPECT_EQ(kernel_l1(nullptr, nullptr, 0, nullptr, 1.0f), 0.0);
 }
 
-TEST(EmulatedKernels, AdamEqualsAdamStepBitForBit) { expect_adam_equal(&train_kernels::emulated_adam_step); }
-TEST(EmulatedKernels, L1GradientEqualsTheCpuBitForBit) { expect_l1_equal(&train_kernels::emulated_l1_loss); }
+TEST(EmulatedKernels, AdamEqualsAdamStepBitForBit) {
+  for (auto schedule : kSchedules)
+    expect_adam_equal([schedule](Gaussians& m, const Gaussians& g, AdamState& s, const LearningRates& lr, float means_lr,
+                                 bool skip_opacity) {
+      train_kernels::emulated_adam_step(m, g, s, lr, means_lr, skip_opacity, schedule);
+    });
+}
+TEST(EmulatedKernels, L1GradientEqualsTheCpuBitForBit) {
+  for (auto schedule : kSchedules)
+    expect_l1_equal([schedule](const float* a, const float* b, std::size_t count, float* grad, float scale) {
+      return train_kernels::emulated_l1_loss(a, b, count, grad, scale, schedule);
+    });
+}
 
 TEST(DeviceKernels, AdamEqualsAdamStepBitForBit) {
   if (cuda::device_count() == 0) {
@@ -92,11 +105,14 @@ TEST(DeviceKernels, AdamEqualsAdamStepBitForBit) {
     EXPECT_THROW(train_kernels::device_adam_step(m, m, s, LearningRates{}, 1e-4f), Error);
     GTEST_SKIP() << cuda::describe_device();
   }
-  expect_adam_equal(&train_kernels::device_adam_step);
+  expect_adam_equal([](Gaussians& m, const Gaussians& g, AdamState& s, const LearningRates& lr, float means_lr,
+                       bool skip_opacity) { train_kernels::device_adam_step(m, g, s, lr, means_lr, skip_opacity); });
 }
 TEST(DeviceKernels, L1GradientEqualsTheCpuBitForBit) {
   if (cuda::device_count() == 0) GTEST_SKIP() << cuda::describe_device();
-  expect_l1_equal(&train_kernels::device_l1_loss);
+  expect_l1_equal([](const float* a, const float* b, std::size_t count, float* grad, float scale) {
+    return train_kernels::device_l1_loss(a, b, count, grad, scale);
+  });
 }
 
 }  // namespace

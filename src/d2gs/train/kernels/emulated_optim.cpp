@@ -6,13 +6,14 @@
 namespace d2gs::train_kernels {
 
 void emulated_adam_step(Gaussians& model, const Gaussians& grads, AdamState& state, const LearningRates& lr,
-                        float means_lr, bool skip_opacity) {
-  render::kernels::emulate::HostBackend backend;
+                        float means_lr, bool skip_opacity, render::kernels::emulate::Schedule schedule) {
+  render::kernels::emulate::HostBackend backend{schedule};
   adam_step(backend, model, grads, state, lr, means_lr, skip_opacity);
 }
 
-double emulated_l1_loss(const float* a, const float* b, std::size_t count, float* grad, float scale) {
-  render::kernels::emulate::HostBackend backend;
+double emulated_l1_loss(const float* a, const float* b, std::size_t count, float* grad, float scale,
+                        render::kernels::emulate::Schedule schedule) {
+  render::kernels::emulate::HostBackend backend{schedule};
   return l1_loss(backend, a, b, count, grad, scale);
 }
 
