@@ -384,6 +384,19 @@ TEST(EmulatedKernels, TilesOfOneGaussianEach) {
   }
 }
 
+TEST(EmulatedKernels, EmptyModelGivesEmptyTiles) {
+  const auto cam = test_camera<float>(40, 30, 1);
+  TestModel<float> m;
+  m.sh_degree = 1;
+  for (auto& runner : emulated_runners()) {
+    const auto& f = runner->forward(m.view(), nullptr, cam, StageOptions{});
+    EXPECT_TRUE(f.radii.empty() && f.isect_keys.empty() && f.isect_gaussians.empty());
+    EXPECT_EQ(f.tile_ranges, std::vector<int>(3 * 2 * 2, 0));
+    const auto& b = runner->backward(render::kernels::ProjectedGradsIn{});
+    EXPECT_TRUE(b.means.empty() && b.sh_rest.empty());
+  }
+}
+
 TEST(EmulatedKernels, FernEqualsTheCpuStagesBitForBit) {
   const FernCase fern = load_fern_case();
   ASSERT_GT(fern.model.size(), 1000u);
