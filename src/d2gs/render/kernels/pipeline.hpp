@@ -1,0 +1,275 @@
+#pragma once
+// The host side of the stages: buffers, the order of the launches, the recursive scan, the sort. Written
+// once over a Backend (emulated_stages.cpp: host vectors and the emulator; cuda/stages.cu: device memory,
+// kernel<<<>>> and CUB), so CI runs this sequence too, not only the kernel bodies.
+//
+// A Backend provides: Array<T> (resize(n) grows without keeping contents, data()), launch<Body>(blocks,
+// threads, args), upload(array, host pointer, n) (resizes), download(vector, array, n), read(array, i)
+// (one value), zero(array, n), and sort_pairs(keys, keys_out, values, values_out, n, end_bit).
+#include <cstdint>
+#include <cstring>
+#include <utility>
+#include <vector>
+
+#include "d2gs/core/error.hpp"
+#include "d2gs/render/kernels/intersect_kernels.hpp"
+#include "d2gs/render/kernels/projection_kernels.hpp"
+#include "d2gs/render/kernels/scan_kernels.hpp"
+#include "d2gs/render/kernels/sh_kernels.hpp"
+#include "d2gs/render/kernels/stages.hpp"
+
+namespace d2gs::render::kernels {
+
+// In-place inclusive scan of n ints: block scans, the block totals scanned the same way (one level per
+// factor of kScanBlock), then the totals of earlier blocks added. `levels` keeps the totals' buffers.
+template <class Backend, class Levels>
+void inclusive_scan(Backend& backend, int* data, int n, Levels& levels, std::size_t level = 0) {
+  if (n <= 0) return;
+  const int blocks = blocks_for(n, kScanBlock);
+  if (levels.size() <= level) levels.resize(level + 1);
+  levels[level].resize(static_cast<std::size_t>(blocks));
+  ScanArgs scan;
+  scan.n = n;
+  scan.data = data;
+  scan.block_sums = levels[level].data();
+  backend.template launch<BlockScanKernel>(blocks, kScanBlock, scan);
+  if (blocks == 1) return;
+  inclusive_scan(backend, levels[level].data(), blocks, levels, level + 1);
+  AddBlockOffsetsArgs add;
+  add.n = n;
+  add.data = data;
+  add.scanned_block_sums = levels[level].data();  // levels may have grown: index again
+  backend.template launch<AddBlockOffsetsKernel>(blocks, kScanBlock, add);
+}
+
+// Bits needed for tile ids 0 .. tiles - 1 (the sort ignores the key bits above 32 + this).
+inline int tile_id_bits(int tiles) {
+  int bits = 0;
+  while ((1LL << bits) < tiles) ++bits;
+  return bits;
+}
+
+template <class Backend>
+class StagePipeline final : public StageRunner {
+public:
+  template <class... A>
+  explicit StagePipeline(const char* name, A&&... backend_args)
+      : name_(name), backend_(std::forward<A>(backend_args)...) {}
+
+  const char* name() const override { return name_; }
+
+  const ForwardStages& forward(const cpu::ModelView<float>& model, const float* opacity_multiplier,
+                               const CameraParams<float>& camera, const StageOptions& options) override {
+    if (model.sh_degree < 0 || model.sh_degree > 3) fail("stages: model SH degree {} is outside 0..3", model.sh_degree);
+    if (options.active_degree < 0 || options.active_degree > model.sh_degree)
+      fail("stages: active SH degree {} is outside 0..{}", options.active_degree, model.sh_degree);
+    if (camera.width <= 0 || camera.height <= 0) fail("stages: camera size {}x{} is empty", camera.width, camera.height);
+    n_ = model.count;
+    if (n_ > static_cast<std::size_t>(1) << 30) fail("stages: {} Gaussians exceed the int32 indices", n_);
+    const int n = static_cast<int>(n_);
+    rest_count_ = model.sh_rest_count();
+    camera_ = camera;
+    options_ = options;
+    has_multiplier_ = opacity_multiplier != nullptr;
+    backend_.upload(means_, model.means, n_ * 3);
+    backend_.upload(log_scales_, model.log_scales, n_ * 3);
+    backend_.upload(quats_, model.quats, n_ * 4);
+    backend_.upload(opacity_logits_, model.opacity_logits, n_);
+    backend_.upload(sh_dc_, model.sh_dc, n_ * 3);
+    backend_.upload(sh_rest_, model.sh_rest, n_ * static_cast<std::size_t>(rest_count_) * 3);
+    if (has_multiplier_) backend_.upload(multiplier_, opacity_multiplier, n_);
+    mean2d_.resize(n_ * 2);
+    conic_.resize(n_ * 3);
+    depth_.resize(n_);
+    opacity_.resize(n_);
+    radii_.resize(n_);
+    color_.resize(n_ * 3);
+    clamped_.resize(n_ * 3);
+    rects_.resize(n_ * 4);
+    counts_.resize(n_);
+    offsets_.resize(n_);
+
+    auto& out = out_;
+    out.tiles_x = (camera.width + kTileSize - 1) / kTileSize;
+    out.tiles_y = (camera.height + kTileSize - 1) / kTileSize;
+    const int tiles = out.tiles_x * out.tiles_y;
+    const int blocks = blocks_for(n);
+
+    ProjectionFwdArgs p;
+    p.n = n;
+    p.tiles_x = out.tiles_x;
+    p.tiles_y = out.tiles_y;
+    p.means = means_.data();
+    p.log_scales = log_scales_.data();
+    p.quats = quats_.data();
+    p.opacity_logits = opacity_logits_.data();
+    p.multiplier = has_multiplier_ ? multiplier_.data() : nullptr;
+    p.cam = camera;
+    p.mean2d = mean2d_.data();
+    p.conic = conic_.data();
+    p.depth = depth_.data();
+    p.opacity = opacity_.data();
+    p.radii = radii_.data();
+    backend_.template launch<ProjectionFwdKernel>(blocks, kBlockThreads, p);
+
+    ShFwdArgs s;
+    s.n = n;
+    s.active_degree = options.active_degree;
+    s.rest_count = rest_count_;
+    s.means = means_.data();
+    s.sh_dc = sh_dc_.data();
+    s.sh_rest = sh_rest_.data();
+    s.radii = radii_.data();
+    for (int k = 0; k < 3; ++k) s.campos[k] = camera.campos[k];
+    s.color = color_.data();
+    s.color_clamped = clamped_.data();
+    backend_.template launch<ShFwdKernel>(blocks, kBlockThreads, s);
+
+    TileCountArgs c;
+    c.n = n;
+    c.tiles_x = out.tiles_x;
+    c.tiles_y = out.tiles_y;
+    c.alpha_min = static_cast<float>(options.alpha_min);
+    c.mean2d = mean2d_.data();
+    c.conic = conic_.data();
+    c.opacity = opacity_.data();
+    c.radii = radii_.data();
+    c.rects = rects_.data();
+    c.counts = counts_.data();
+    c.offsets = offsets_.data();
+    backend_.template launch<TileCountKernel>(blocks, kBlockThreads, c);
+    kernels::inclusive_scan(backend_, offsets_.data(), n, scan_levels_);
+
+    const int m = n > 0 ? backend_.read(offsets_, n_ - 1) : 0;  // the one value read back
+    const std::size_t ms = static_cast<std::size_t>(m);
+    keys_.resize(ms);
+    keys_sorted_.resize(ms);
+    gaussians_.resize(ms);
+    gaussians_sorted_.resize(ms);
+    ranges_.resize(static_cast<std::size_t>(tiles) * 2);
+    EmitKeysArgs e;
+    e.n = n;
+    e.tiles_x = out.tiles_x;
+    e.rects = rects_.data();
+    e.offsets = offsets_.data();
+    e.depth = depth_.data();
+    e.keys = keys_.data();
+    e.gaussians = gaussians_.data();
+    backend_.template launch<EmitKeysKernel>(blocks, kBlockThreads, e);
+    backend_.sort_pairs(keys_, keys_sorted_, gaussians_, gaussians_sorted_, ms, 32 + tile_id_bits(tiles));
+    backend_.zero(ranges_, static_cast<std::size_t>(tiles) * 2);
+    TileRangesArgs r;
+    r.m = m;
+    r.keys = keys_sorted_.data();
+    r.ranges = ranges_.data();
+    backend_.template launch<TileRangesKernel>(blocks_for(m), kBlockThreads, r);
+
+    backend_.download(out.mean2d, mean2d_, n_ * 2);
+    backend_.download(out.conic, conic_, n_ * 3);
+    backend_.download(out.depth, depth_, n_);
+    backend_.download(out.opacity, opacity_, n_);
+    backend_.download(out.radii, radii_, n_);
+    backend_.download(out.color, color_, n_ * 3);
+    backend_.download(out.color_clamped, clamped_, n_ * 3);
+    backend_.download(out.rects, rects_, n_ * 4);
+    backend_.download(out.tile_counts, counts_, n_);
+    backend_.download(out.isect_offsets, offsets_, n_);
+    backend_.download(out.isect_keys, keys_sorted_, ms);
+    backend_.download(out.isect_gaussians, gaussians_sorted_, ms);
+    backend_.download(out.tile_ranges, ranges_, static_cast<std::size_t>(tiles) * 2);
+    return out_;
+  }
+
+  const BackwardStages& backward(const ProjectedGradsIn& g) override {
+    const int n = static_cast<int>(n_);
+    backend_.upload(d_mean2d_, g.mean2d, n_ * 2);
+    backend_.upload(d_conic_, g.conic, n_ * 3);
+    backend_.upload(d_depth_, g.depth, n_);
+    backend_.upload(d_opacity_, g.opacity, n_);
+    backend_.upload(d_color_, g.color, n_ * 3);
+    const std::size_t rest = n_ * static_cast<std::size_t>(rest_count_) * 3;
+    d_means_.resize(n_ * 3);
+    d_log_scales_.resize(n_ * 3);
+    d_quats_.resize(n_ * 4);
+    d_opacity_logits_.resize(n_);
+    d_sh_dc_.resize(n_ * 3);
+    d_sh_rest_.resize(rest);
+    const int blocks = blocks_for(n);
+
+    ProjectionBwdArgs p;
+    p.n = n;
+    p.means = means_.data();
+    p.log_scales = log_scales_.data();
+    p.quats = quats_.data();
+    p.opacity_logits = opacity_logits_.data();
+    p.multiplier = has_multiplier_ ? multiplier_.data() : nullptr;
+    p.cam = camera_;
+    p.radii = radii_.data();
+    p.d_mean2d = d_mean2d_.data();
+    p.d_conic = d_conic_.data();
+    p.d_depth = d_depth_.data();
+    p.d_opacity = d_opacity_.data();
+    p.d_means = d_means_.data();
+    p.d_log_scales = d_log_scales_.data();
+    p.d_quats = d_quats_.data();
+    p.d_opacity_logits = d_opacity_logits_.data();
+    backend_.template launch<ProjectionBwdKernel>(blocks, kBlockThreads, p);
+
+    ShBwdArgs s;
+    s.n = n;
+    s.active_degree = options_.active_degree;
+    s.rest_count = rest_count_;
+    s.means = means_.data();
+    s.sh_dc = sh_dc_.data();
+    s.sh_rest = sh_rest_.data();
+    s.radii = radii_.data();
+    s.color_clamped = clamped_.data();
+    for (int k = 0; k < 3; ++k) s.campos[k] = camera_.campos[k];
+    s.d_color = d_color_.data();
+    s.d_sh_dc = d_sh_dc_.data();
+    s.d_sh_rest = d_sh_rest_.data();
+    s.d_means = d_means_.data();
+    backend_.template launch<ShBwdKernel>(blocks, kBlockThreads, s);
+
+    backend_.download(grads_.means, d_means_, n_ * 3);
+    backend_.download(grads_.log_scales, d_log_scales_, n_ * 3);
+    backend_.download(grads_.quats, d_quats_, n_ * 4);
+    backend_.download(grads_.opacity_logits, d_opacity_logits_, n_);
+    backend_.download(grads_.sh_dc, d_sh_dc_, n_ * 3);
+    backend_.download(grads_.sh_rest, d_sh_rest_, rest);
+    return grads_;
+  }
+
+  std::vector<int> inclusive_scan(const std::vector<int>& values) override {
+    backend_.upload(scan_data_, values.data(), values.size());
+    kernels::inclusive_scan(backend_, scan_data_.data(), static_cast<int>(values.size()), scan_levels_);
+    std::vector<int> out;
+    backend_.download(out, scan_data_, values.size());
+    return out;
+  }
+
+private:
+  template <class T>
+  using Array = typename Backend::template Array<T>;
+
+  const char* name_;
+  Backend backend_;
+  std::size_t n_ = 0;
+  int rest_count_ = 0;
+  bool has_multiplier_ = false;
+  CameraParams<float> camera_{};
+  StageOptions options_{};
+  Array<float> means_, log_scales_, quats_, opacity_logits_, multiplier_, sh_dc_, sh_rest_;
+  Array<float> mean2d_, conic_, depth_, opacity_, color_;
+  Array<int> radii_, rects_, counts_, offsets_, ranges_, scan_data_;
+  Array<std::uint8_t> clamped_;
+  std::vector<Array<int>> scan_levels_;
+  Array<std::uint64_t> keys_, keys_sorted_;
+  Array<std::int32_t> gaussians_, gaussians_sorted_;
+  Array<float> d_mean2d_, d_conic_, d_depth_, d_opacity_, d_color_;
+  Array<float> d_means_, d_log_scales_, d_quats_, d_opacity_logits_, d_sh_dc_, d_sh_rest_;
+  ForwardStages out_;
+  BackwardStages grads_;
+};
+
+}  // namespace d2gs::render::kernels

@@ -1,0 +1,69 @@
+#pragma once
+// The CUDA backend's per-Gaussian stages and binning as one interface with two executions: the GPU
+// (cuda::make_device_stages, render/cuda/stages.hpp) and the CPU emulation of the same kernels
+// (make_emulated_stages). Inputs and outputs are host arrays, so tests compare every stage's output with
+// the CPU reference backend; inside, the stages run back to back on the device (kernels/pipeline.hpp)
+// with one scalar read back (the number of intersections).
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "d2gs/render/cpu/types.hpp"
+#include "d2gs/render/kernels/emulate.hpp"
+
+namespace d2gs::render::kernels {
+
+struct StageOptions {
+  int active_degree = 0;               // SH degree in use (<= the model's)
+  double alpha_min = 1.0 / 255.0;      // compositing cutoff: 1/255, or kSmoothAlphaLo (smooth cutoff)
+};
+
+// Every stage's outputs, downloaded.
+struct ForwardStages {
+  int tiles_x = 0, tiles_y = 0;
+  // projection (cpu::project_forward)
+  std::vector<float> mean2d, conic, depth, opacity;
+  std::vector<int> radii;
+  // SH (cpu::sh_forward)
+  std::vector<float> color;
+  std::vector<std::uint8_t> color_clamped;
+  // tile intersection (cpu::bin_gaussians)
+  std::vector<int> rects;          // N x 4
+  std::vector<int> tile_counts;    // N
+  std::vector<int> isect_offsets;  // N: inclusive scan of tile_counts
+  std::vector<std::uint64_t> isect_keys;  // M, sorted: tile << 32 | depth bits
+  std::vector<int> isect_gaussians;       // M, in key order
+  std::vector<int> tile_ranges;           // tiles x 2: [begin, end) into the sorted intersections
+};
+
+// dL/d of the projected quantities (what compositing's backward produces), N-sized host arrays.
+struct ProjectedGradsIn {
+  const float* mean2d = nullptr;   // N x 2
+  const float* conic = nullptr;    // N x 3
+  const float* depth = nullptr;    // N
+  const float* opacity = nullptr;  // N
+  const float* color = nullptr;    // N x 3
+};
+
+// Model-shaped gradients, downloaded.
+struct BackwardStages {
+  std::vector<float> means, log_scales, quats, opacity_logits, sh_dc, sh_rest;
+};
+
+class StageRunner {
+public:
+  virtual ~StageRunner() = default;
+  virtual const char* name() const = 0;
+  // Projection, SH and tile intersection of `model` (float), seen by `camera`.
+  virtual const ForwardStages& forward(const cpu::ModelView<float>& model, const float* opacity_multiplier,
+                                       const CameraParams<float>& camera, const StageOptions& options) = 0;
+  // Projection and SH backward for the model, multiplier and camera of the last forward (alive).
+  virtual const BackwardStages& backward(const ProjectedGradsIn& grads) = 0;
+  // The device scan alone (kernels/scan_kernels.hpp), for tests of sizes the scenes do not reach.
+  virtual std::vector<int> inclusive_scan(const std::vector<int>& values) = 0;
+};
+
+// The kernels run on the CPU by the emulator (kernels/emulate.hpp).
+std::unique_ptr<StageRunner> make_emulated_stages(emulate::Schedule schedule = emulate::Schedule::Forward);
+
+}  // namespace d2gs::render::kernels

@@ -1,0 +1,15 @@
+// Built when the CUDA backend is off: the GPU versions of the Adam and L1 kernels report that there is no GPU.
+#include "d2gs/core/error.hpp"
+#include "d2gs/render/cuda/device.hpp"
+#include "d2gs/train/kernels/optim.hpp"
+
+namespace d2gs::train_kernels {
+
+void device_adam_step(Gaussians&, const Gaussians&, AdamState&, const LearningRates&, float, bool) {
+  fail("CUDA: {}", cuda::describe_device());
+}
+double device_l1_loss(const float*, const float*, std::size_t, float*, float) {
+  fail("CUDA: {}", cuda::describe_device());
+}
+
+}  // namespace d2gs::train_kernels

@@ -1,0 +1,20 @@
+// Adam and the L1 loss kernels through the CPU emulator (every build; CI runs them without a GPU).
+#include "d2gs/render/kernels/host_backend.hpp"
+#include "d2gs/train/kernels/optim.hpp"
+#include "d2gs/train/kernels/optim_pipeline.hpp"
+
+namespace d2gs::train_kernels {
+
+void emulated_adam_step(Gaussians& model, const Gaussians& grads, AdamState& state, const LearningRates& lr,
+                        float means_lr, bool skip_opacity, render::kernels::emulate::Schedule schedule) {
+  render::kernels::emulate::HostBackend backend{schedule};
+  adam_step(backend, model, grads, state, lr, means_lr, skip_opacity);
+}
+
+double emulated_l1_loss(const float* a, const float* b, std::size_t count, float* grad, float scale,
+                        render::kernels::emulate::Schedule schedule) {
+  render::kernels::emulate::HostBackend backend{schedule};
+  return l1_loss(backend, a, b, count, grad, scale);
+}
+
+}  // namespace d2gs::train_kernels

@@ -1,0 +1,24 @@
+#pragma once
+// Adam (adam_kernels.hpp) and the L1 loss with its gradient (l1_kernels.hpp) as kernels: through the CPU
+// emulator (render/kernels/emulate.hpp) in every build, and on the GPU (train/cuda/optim.cu) when there
+// is one. Same arguments and results as Adam::step and l1_loss; host arrays in and out.
+#include <cstddef>
+
+#include "d2gs/render/kernels/emulate.hpp"
+#include "d2gs/train/adam.hpp"
+
+namespace d2gs::train_kernels {
+
+// `schedule`: the emulator's order of blocks and threads and its shared-memory visibility (emulate.hpp).
+void emulated_adam_step(Gaussians& model, const Gaussians& grads, AdamState& state, const LearningRates& lr,
+                        float means_lr, bool skip_opacity = false,
+                        render::kernels::emulate::Schedule schedule = render::kernels::emulate::Schedule::Forward);
+double emulated_l1_loss(const float* a, const float* b, std::size_t count, float* grad = nullptr, float scale = 1.0f,
+                        render::kernels::emulate::Schedule schedule = render::kernels::emulate::Schedule::Forward);
+
+// The same on the GPU; d2gs::Error without one.
+void device_adam_step(Gaussians& model, const Gaussians& grads, AdamState& state, const LearningRates& lr,
+                      float means_lr, bool skip_opacity = false);
+double device_l1_loss(const float* a, const float* b, std::size_t count, float* grad = nullptr, float scale = 1.0f);
+
+}  // namespace d2gs::train_kernels

@@ -1,0 +1,97 @@
+#pragma once
+// The host side of the Adam and L1 kernels over a backend of render/kernels/pipeline.hpp (host vectors and
+// the emulator, or device memory and kernel_shell): written once, run by CI through the emulator.
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+#include "d2gs/core/error.hpp"
+#include "d2gs/render/kernels/block.hpp"
+#include "d2gs/train/adam.hpp"
+#include "d2gs/train/kernels/adam_kernels.hpp"
+#include "d2gs/train/kernels/l1_kernels.hpp"
+
+namespace d2gs::train_kernels {
+
+// Adam::step's scalars of a group with learning rate lr (bias1, bias2 of the step).
+inline AdamScalars adam_scalars(double lr, double bias1, double bias2) {
+  AdamScalars s;
+  s.b1 = static_cast<float>(Adam::kBeta1);
+  s.b2 = static_cast<float>(Adam::kBeta2);
+  s.step_size = static_cast<float>(lr / bias1);
+  s.inv_sqrt_bias2 = static_cast<float>(1.0 / std::sqrt(bias2));
+  s.eps = static_cast<float>(Adam::kEps);
+  return s;
+}
+
+template <class Backend>
+void adam_step(Backend& backend, Gaussians& model, const Gaussians& grads, AdamState& state, const LearningRates& lr,
+               float means_lr, bool skip_opacity) {
+  grads.validate();
+  if (grads.size() != model.size() || state.exp_avg.size() != model.size() || grads.sh_degree != model.sh_degree)
+    fail("Adam: model, gradients and moments are not aligned ({}, {}, {} rows)", model.size(), grads.size(),
+         state.exp_avg.size());
+  ++state.step;
+  const double bias1 = 1.0 - std::pow(Adam::kBeta1, static_cast<double>(state.step));
+  const double bias2 = 1.0 - std::pow(Adam::kBeta2, static_cast<double>(state.step));
+  typename Backend::template Array<float> p, g, m, v;
+  auto group = [&](std::vector<float>& param, const std::vector<float>& grad, std::vector<float>& exp_avg,
+                   std::vector<float>& exp_avg_sq, double rate) {
+    const std::size_t n = param.size();
+    if (n == 0) return;
+    backend.upload(p, param.data(), n);
+    backend.upload(g, grad.data(), n);
+    backend.upload(m, exp_avg.data(), n);
+    backend.upload(v, exp_avg_sq.data(), n);
+    AdamArgs a;
+    a.n = static_cast<int>(n);
+    a.param = p.data();
+    a.grad = g.data();
+    a.exp_avg = m.data();
+    a.exp_avg_sq = v.data();
+    a.s = adam_scalars(rate, bias1, bias2);
+    backend.template launch<AdamKernel>(render::kernels::blocks_for(static_cast<long long>(n)),
+                                        render::kernels::kBlockThreads, a);
+    backend.download(param, p, n);
+    backend.download(exp_avg, m, n);
+    backend.download(exp_avg_sq, v, n);
+  };
+  auto& em = state.exp_avg;
+  auto& ev = state.exp_avg_sq;
+  group(model.means, grads.means, em.means, ev.means, means_lr);
+  group(model.sh_dc, grads.sh_dc, em.sh_dc, ev.sh_dc, lr.sh_dc);
+  group(model.sh_rest, grads.sh_rest, em.sh_rest, ev.sh_rest, lr.sh_rest);
+  if (!skip_opacity) group(model.opacity_logits, grads.opacity_logits, em.opacity_logits, ev.opacity_logits, lr.opacity);
+  group(model.log_scales, grads.log_scales, em.log_scales, ev.log_scales, lr.scales);
+  group(model.quats, grads.quats, em.quats, ev.quats, lr.quats);
+}
+
+template <class Backend>
+double l1_loss(Backend& backend, const float* a, const float* b, std::size_t count, float* grad, float scale) {
+  if (count == 0) return 0.0;
+  if (count > (std::size_t{1} << 31) - 1) fail("L1 kernel: {} values exceed the int32 indices", count);
+  typename Backend::template Array<float> da, db, dg;
+  typename Backend::template Array<double> sum;
+  backend.upload(da, a, count);
+  backend.upload(db, b, count);
+  if (grad) backend.upload(dg, grad, count);
+  const double zero = 0.0;
+  backend.upload(sum, &zero, 1);
+  L1Args args;
+  args.n = static_cast<int>(count);
+  args.a = da.data();
+  args.b = db.data();
+  args.grad = grad ? dg.data() : nullptr;
+  args.g = scale / static_cast<float>(count);
+  args.sum = sum.data();
+  backend.template launch<L1Kernel>(render::kernels::blocks_for(static_cast<long long>(count)),
+                                    render::kernels::kBlockThreads, args);
+  if (grad) {
+    std::vector<float> out;
+    backend.download(out, dg, count);
+    std::copy(out.begin(), out.end(), grad);
+  }
+  return backend.read(sum, 0) / static_cast<double>(count);
+}
+
+}  // namespace d2gs::train_kernels

@@ -1,0 +1,103 @@
+#pragma once
+// Runs the CPU reference backend's stage functions and a kernel StageRunner (emulated or GPU) on the same
+// scene and measures how far every output lies from the reference.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "d2gs/render/cpu/binning.hpp"
+#include "d2gs/render/cpu/projection.hpp"
+#include "d2gs/render/cpu/sh.hpp"
+#include "d2gs/render/kernels/stages.hpp"
+#include "render/render_test_util.hpp"
+
+namespace d2gs::test {
+
+struct CpuStages {
+  render::cpu::Projected<float> proj;
+  render::cpu::Binning<float> bin;
+};
+
+inline CpuStages cpu_forward(const render::cpu::ModelView<float>& model, const float* multiplier,
+                             const render::CameraParams<float>& cam, const render::kernels::StageOptions& options) {
+  CpuStages s;
+  render::cpu::project_forward(model, multiplier, cam, s.proj);
+  render::cpu::sh_forward(model, options.active_degree, cam, s.proj);
+  render::cpu::bin_gaussians(s.proj, cam.width, cam.height, options.alpha_min, s.bin);
+  return s;
+}
+
+// Every tile's Gaussians, front to back.
+inline std::vector<std::vector<int>> cpu_tile_lists(const render::cpu::Binning<float>& bin) {
+  std::vector<std::vector<int>> lists(static_cast<std::size_t>(bin.tiles_x) * bin.tiles_y);
+  for (std::size_t t = 0; t < lists.size(); ++t)
+    for (int pos = bin.tile_offsets[t]; pos < bin.tile_offsets[t + 1]; ++pos)
+      lists[t].push_back(bin.rank_gaussian[bin.isect_rank[pos]]);
+  return lists;
+}
+inline std::vector<std::vector<int>> kernel_tile_lists(const render::kernels::ForwardStages& f) {
+  std::vector<std::vector<int>> lists(static_cast<std::size_t>(f.tiles_x) * f.tiles_y);
+  for (std::size_t t = 0; t < lists.size(); ++t)
+    for (int j = f.tile_ranges[t * 2]; j < f.tile_ranges[t * 2 + 1]; ++j) lists[t].push_back(f.isect_gaussians[j]);
+  return lists;
+}
+
+// Number of entries whose bits differ, and the largest absolute difference (NaN counts as a mismatch).
+struct Diff {
+  std::size_t bit_mismatches = 0;
+  double max_abs = 0;
+};
+inline Diff diff(const float* a, const float* b, std::size_t n) {
+  Diff d;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (std::memcmp(&a[i], &b[i], sizeof(float)) != 0) ++d.bit_mismatches;
+    const double e = std::abs(double(a[i]) - double(b[i]));
+    d.max_abs = std::max(d.max_abs, std::isnan(e) ? INFINITY : e);
+  }
+  return d;
+}
+
+// Random dL/d(projected quantities), as compositing's backward would hand them over.
+struct RandomProjectedGrads {
+  std::vector<float> mean2d, conic, depth, opacity, color;
+  RandomProjectedGrads(std::size_t n, unsigned seed) {
+    std::mt19937 rng(seed);
+    std::normal_distribution<float> g(0.0f, 1.0f);
+    auto fill = [&](std::vector<float>& v, std::size_t size, float scale) {
+      v.resize(size);
+      for (auto& x : v) x = scale * g(rng);
+    };
+    fill(mean2d, n * 2, 1e-2f);
+    fill(conic, n * 3, 1.0f);
+    fill(depth, n, 1e-2f);
+    fill(opacity, n, 1e-1f);
+    fill(color, n * 3, 1e-1f);
+  }
+  render::kernels::ProjectedGradsIn in() const {
+    return {mean2d.data(), conic.data(), depth.data(), opacity.data(), color.data()};
+  }
+  render::cpu::ProjectedGrads<float> cpu() const {
+    render::cpu::ProjectedGrads<float> p;
+    p.mean2d = mean2d;
+    p.conic = conic;
+    p.depth = depth;
+    p.opacity = opacity;
+    p.color = color;
+    return p;
+  }
+};
+
+// A model made from fern's SfM points (shared data), with random shapes, opacities and SH, and a
+// DropGaussian-like multiplier (zeros and 1/(1 - r) compensation); and fern's cameras at 1/8 resolution.
+struct FernCase {
+  TestModel<float> model;
+  std::vector<render::CameraParams<float>> cameras;
+};
+FernCase load_fern_case();
+
+}  // namespace d2gs::test
