@@ -51,6 +51,29 @@ double psnr_of(const fs::path& run) {
   return nlohmann::json::parse(read_file(run / "results.json"))["mean"]["PSNR"].get<double>();
 }
 
+// The folder's copy of the configuration (experiment.json, read back by --run-index and resumes, without
+// a data root) names a relative initial cloud by its absolute path, at the train and at the method level.
+TEST(ExperimentRuns, StoredStateKeepsRelativeInitCloudsUnderTheDataRoot) {
+  const auto dir = test::scratch_dir();
+  const fs::path cloud = fs::absolute(test::shared_data() / "published_init/fern/3_views_fused.ply").lexically_normal();
+  for (const bool method_level : {false, true}) {
+    nlohmann::json j = nlohmann::json::parse(read_file(write_config(
+        dir, {{{"method", "dropgaussian"}, {"variant", "dense"}, {"options", {{"init", "dense"}}}},
+              {{"method", "dropgaussian"}, {"variant", "cloud"}}},
+        {0}, 6, 3)));
+    if (method_level) j["methods"][1]["options"] = {{"init", "published_init/fern/3_views_fused.ply"}};
+    else j["train"]["init"] = "published_init/fern/3_views_fused.ply";
+    write_file_atomic(dir / "exp.json", j.dump(2));
+    const ExperimentConfig config = load_experiment_config(dir / "exp.json", "");
+    const fs::path out = dir / (method_level ? "method" : "train");
+    write_experiment_state(out, config, expand_runs(config, out));
+    const auto [stored, runs] = read_experiment_state(out);
+    ASSERT_EQ(runs.size(), 2u);
+    EXPECT_EQ(runs[0].train_config["init"], "dense") << method_level;
+    EXPECT_EQ(runs[1].train_config["init"], cloud.string()) << method_level;
+  }
+}
+
 TEST(ExperimentRuns, TwoMethodsTwoSeedsInParallelThenSkipped) {
   const auto dir = test::scratch_dir();
   const auto config = write_config(dir, {{{"method", "3dgs"}}, {{"method", "dropgaussian"}}}, {0, 1}, 6, 3);

@@ -187,6 +187,13 @@ ExperimentConfig parse_experiment_config(const nlohmann::json& j, const fs::path
   return c;
 }
 
+std::string resolve_init_path(const std::string& init, const std::string& data_root) {
+  if (init == "dense" || init == "sparse" || init == "random" || init == "sfm-all-views" || init.empty() ||
+      !fs::path(init).is_relative() || data_root.empty())
+    return init;
+  return fs::absolute(fs::path(data_root) / init).lexically_normal().string();
+}
+
 std::vector<RunSpec> expand_runs(const ExperimentConfig& config, const fs::path& out_dir) {
   const fs::path root = fs::absolute(out_dir).lexically_normal();
   std::vector<RunSpec> runs;
@@ -221,10 +228,7 @@ std::vector<RunSpec> expand_runs(const ExperimentConfig& config, const fs::path&
               c.scene_preset = scene_preset;
             }
             update_from_json(c, m.options);
-            // An initial cloud named by a relative path is, as a scene's source, relative to data_root.
-            if (c.init != "dense" && c.init != "sparse" && c.init != "random" && c.init != "sfm-all-views" &&
-                !c.init.empty() && fs::path(c.init).is_relative() && !config.data_root.empty())
-              c.init = fs::absolute(fs::path(config.data_root) / c.init).lexically_normal().string();
+            c.init = resolve_init_path(c.init, config.data_root);
             c.source = scene.source;
             c.model_dir = (root / r.dir).string();
             c.n_views = views;

@@ -83,4 +83,8 @@ struct RunSpec {
 // n_views, seed, method, checkpoints).
 std::vector<RunSpec> expand_runs(const ExperimentConfig& config, const std::filesystem::path& out_dir);
 
+// An initial cloud named by a relative path is, as a scene's source, under data_root: the absolute path.
+// Keywords (dense, sparse, random, sfm-all-views), absolute paths and an empty data_root leave it as it is.
+std::string resolve_init_path(const std::string& init, const std::string& data_root);
+
 }  // namespace d2gs::experiment

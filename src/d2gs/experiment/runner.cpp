@@ -252,8 +252,18 @@ std::vector<RunOutcome> run_all(const std::vector<RunSpec>& runs, const fs::path
 }
 
 void write_experiment_state(const fs::path& out_dir, const ExperimentConfig& config, const std::vector<RunSpec>& runs) {
+  // The folder's own copy of the configuration is read back without a data root (sources are stored
+  // absolute), so relative initial clouds are stored absolute too.
   nlohmann::json raw = config.raw;
   raw.erase("data_root");
+  const auto absolute_init = [&](nlohmann::json& options) {
+    if (options.is_object() && options.contains("init") && options["init"].is_string())
+      options["init"] = resolve_init_path(options["init"].get<std::string>(), config.data_root);
+  };
+  if (raw.contains("train")) absolute_init(raw["train"]);
+  if (raw.contains("methods") && raw["methods"].is_array())
+    for (auto& m : raw["methods"])
+      if (m.contains("options")) absolute_init(m["options"]);
   for (std::size_t k = 0; k < config.scenes.size() && k < raw["scenes"].size(); ++k) {
     raw["scenes"][k]["source"] = config.scenes[k].source;
     raw["scenes"][k]["name"] = config.scenes[k].name;
