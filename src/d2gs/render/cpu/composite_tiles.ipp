@@ -84,7 +84,8 @@ struct SplatInTile {
       const V x_lo = centre - half - T(1), x_hi = centre + half + T(1);
       for (int c = 0; c < C; ++c)
         vecs[c] |= lane_bits(ok & (x_lo <= T(px0 + c * VL + VL - 1)) & (x_hi >= T(px0 + c * VL))) << (g * VL);
-      const V h = (T(-0.5) * s.qc) * d * d, b = -s.qb * d;
+      // by holds 0 + (-qb dy), the term row_power adds as it is (the sum with 0 turns a -0 into +0).
+      const V h = (T(-0.5) * s.qc) * d * d, b = V{} + -s.qb * d;
       std::memcpy(&dy[g * VL], &d, sizeof(V));
       std::memcpy(&hy[g * VL], &h, sizeof(V));
       std::memcpy(&by[g * VL], &b, sizeof(V));
@@ -102,7 +103,8 @@ struct SplatInTile {
 // row): the one formula both passes use.
 template <typename V, typename T>
 D2GS_TILE_INLINE V row_power(V hx, V dx, T hy, T by) {
-  return fmadd(V{} + by, dx, hx + hy);
+  // by is already 0 + (-qb dy) (init); by - 0 is by in every lane, a plain broadcast.
+  return fmadd(by - V{}, dx, hx + hy);
 }
 
 // The splats of a tile list are scattered over the depth-sorted array (a cache miss each): fetch the
@@ -362,17 +364,20 @@ void backward_tile(const Binning<T>& bin, int tile, const T bg[3], bool clamp_pa
     }
     // Lane sums in a fixed order.
     T* out = isect_grads + static_cast<std::size_t>(begin + jl) * kIsectGradStride;
-    const T sx = sum_lanes(a_x), sy = sum_lanes(a_y);
+    T sums[8];
+    sum_lanes4(a_x, a_y, a_xx, a_xy, sums);
+    sum_lanes4(v_r, v_g, v_b, v_z, sums + 4);
+    const T sx = sums[0], sy = sums[1];
     out[0] = -(qa * sx + qb * sy);
     out[1] = -(qb * sx + qc * sy);
-    out[2] = T(-0.5) * sum_lanes(a_xx);
-    out[3] = -sum_lanes(a_xy);
+    out[2] = T(-0.5) * sums[2];
+    out[3] = -sums[3];
     out[4] = T(-0.5) * sum_lanes(a_yy);
     out[5] = sum_lanes(v_o);
-    out[6] = sum_lanes(v_r);
-    out[7] = sum_lanes(v_g);
-    out[8] = sum_lanes(v_b);
-    out[9] = sum_lanes(v_z);
+    out[6] = sums[4];
+    out[7] = sums[5];
+    out[8] = sums[6];
+    out[9] = sums[7];
   }
   // Intersections past the tile's last contributor get no gradient.
   const int count = bin.tile_offsets[tile + 1] - begin;
