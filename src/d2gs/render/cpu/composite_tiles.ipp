@@ -34,8 +34,8 @@ struct SmoothConstants {
 // Lane-wise helpers on tile rows.
 template <typename V>
 D2GS_TILE_INLINE V smoothstep_row(V e) {
-  e = e < 0 ? V{} : e;
-  e = e > 1 ? V{} + 1 : e;
+  e = lane_max(V{}, e);      // e < 0 ? 0 : e
+  e = lane_min(V{} + 1, e);  // e > 1 ? 1 : e
   return e * e * (3 - 2 * e);
 }
 template <typename V>
@@ -79,12 +79,13 @@ struct SplatInTile {
       const V d = s.my - ys[g];
       const V disc = qa_reach - d * d * det;  // qa^2 (half chord)^2
       const M ok = (disc >= T(0)) & (rs[g] >= T(y_lo)) & (rs[g] <= T(y_hi));
-      const V half = sqrt_row(ok ? disc : V{}) * s.inv_qa;
+      const V half = sqrt_row(select_or_zero(ok, disc)) * s.inv_qa;
       const V centre = s.mx + s.qb * d * s.inv_qa;  // x of the chord's midpoint
       const V x_lo = centre - half - T(1), x_hi = centre + half + T(1);
       for (int c = 0; c < C; ++c)
         vecs[c] |= lane_bits(ok & (x_lo <= T(px0 + c * VL + VL - 1)) & (x_hi >= T(px0 + c * VL))) << (g * VL);
-      const V h = (T(-0.5) * s.qc) * d * d, b = -s.qb * d;
+      // by holds 0 + (-qb dy), the term row_power adds as it is (the sum with 0 turns a -0 into +0).
+      const V h = (T(-0.5) * s.qc) * d * d, b = V{} + -s.qb * d;
       std::memcpy(&dy[g * VL], &d, sizeof(V));
       std::memcpy(&hy[g * VL], &h, sizeof(V));
       std::memcpy(&by[g * VL], &b, sizeof(V));
@@ -102,7 +103,8 @@ struct SplatInTile {
 // row): the one formula both passes use.
 template <typename V, typename T>
 D2GS_TILE_INLINE V row_power(V hx, V dx, T hy, T by) {
-  return fmadd(V{} + by, dx, hx + hy);
+  // by is already 0 + (-qb dy) (init); by - 0 is by in every lane, a plain broadcast.
+  return fmadd(by - V{}, dx, hx + hy);
 }
 
 // The splats of a tile list are scattered over the depth-sorted array (a cache miss each): fetch the
@@ -150,6 +152,7 @@ void forward_tile(const Binning<T>& bin, int tile, const T bg[3], T* rgb, T* alp
     if (row_alive[y] > 0) alive_rows |= 1u << y;
   }
   const int begin = bin.tile_offsets[tile], end = bin.tile_offsets[tile + 1];
+  const auto* ek = exp_constants();
   SplatInTile<T> st;
   for (int j = begin; j < std::min(end, begin + kPrefetch); ++j) prefetch_splat(bin, j);
   for (int j = begin; j < end && alive > 0; ++j) {
@@ -158,7 +161,7 @@ void forward_tile(const Binning<T>& bin, int tile, const T bg[3], T* rgb, T* alp
     st.init(s, px0, py0, nrows, xs, ys, rs);
     const M jl = M{} + (j - begin + 1);
     const T o = s.opacity;
-    const T sr = s.r, sg = s.g, sb = s.b, sz = s.z;
+    const V vr = V{} + s.r, vg = V{} + s.g, vb = V{} + s.b, vz = V{} + s.z;
     for (std::uint32_t todo = st.rows & alive_rows; todo != 0; todo &= todo - 1) {
       const int y = std::countr_zero(todo);
       const T hy = st.hy[y], by = st.by[y];
@@ -167,8 +170,8 @@ void forward_tile(const Binning<T>& bin, int tile, const T bg[3], T* rgb, T* alp
         if (!st.visits(y, c)) continue;
         const int k = y * C + c;
         const V power = row_power(st.hx[c], st.dx[c], hy, by);
-        const V og = o * exp_row(power);
-        V alpha = og < T(kAlphaMax) ? og : V{} + T(kAlphaMax);
+        const V og = o * exp_row(power, *ek);
+        V alpha = lane_min(og, V{} + T(kAlphaMax));  // og < 0.99 ? og : 0.99
         M ok;
         if constexpr (Smooth) {
           using K = SmoothConstants<T>;
@@ -183,13 +186,13 @@ void forward_tile(const Binning<T>& bin, int tile, const T bg[3], T* rgb, T* alp
         M stop{};
         if constexpr (!Smooth) stop = ok & (t_next < T(kTransmittanceMin));
         const M comp = ok & ~stop;
-        const V w = comp ? alpha * t_cur : V{};
-        cr[k] = fmadd(w, V{} + sr, cr[k]);
-        cg[k] = fmadd(w, V{} + sg, cg[k]);
-        cb[k] = fmadd(w, V{} + sb, cb[k]);
-        cd[k] = fmadd(w, V{} + sz, cd[k]);
-        Tr[k] = comp ? t_next : t_cur;
-        last[k] = comp ? jl : last[k];
+        const V w = select_or_zero(comp, alpha * t_cur);
+        cr[k] = fmadd(w, vr, cr[k]);
+        cg[k] = fmadd(w, vg, cg[k]);
+        cb[k] = fmadd(w, vb, cb[k]);
+        cd[k] = fmadd(w, vz, cd[k]);
+        Tr[k] = select(comp, t_next, t_cur);
+        last[k] = select(comp, jl, last[k]);
         if constexpr (!Smooth) {
           if (any_lane(stop)) {  // some pixels are done: they leave the row's and the tile's count
             done[k] |= stop;
@@ -266,6 +269,7 @@ void backward_tile(const Binning<T>& bin, int tile, const T bg[3], bool clamp_pa
     tile_max = std::max(tile_max, row_max[y]);
   }
   const int begin = bin.tile_offsets[tile];
+  const auto* ek = exp_constants();
   SplatInTile<T> st;
   for (int jl = tile_max - 1; jl >= std::max(0, tile_max - kPrefetch); --jl) prefetch_splat(bin, begin + jl);
   for (int jl = tile_max - 1; jl >= 0; --jl) {
@@ -274,6 +278,7 @@ void backward_tile(const Binning<T>& bin, int tile, const T bg[3], bool clamp_pa
     st.init(s, px0, py0, nrows, xs, ys, rs);
     const T qa = s.qa, qb = s.qb, qc = s.qc, o = s.opacity;
     const T sr = s.r, sg = s.g, sb = s.b, sz = s.z;
+    const V vr = V{} + sr, vg = V{} + sg, vb = V{} + sb, vz = V{} + sz;
     const M jlv = M{} + jl;
     // d power / d (mx, my, qa, qb, qc) = -(qa dx + qb dy, qb dx + qc dy, dx^2 / 2, dx dy, dy^2 / 2): the
     // five sums below of g = d loss / d power (times dx, dy, dx^2, dx dy, dy^2) give all five gradients.
@@ -288,9 +293,9 @@ void backward_tile(const Binning<T>& bin, int tile, const T bg[3], bool clamp_pa
         const int k = y * C + c;
         const V dx = st.dx[c];
         const V power = row_power(st.hx[c], dx, hy, by);
-        const V G = exp_row(power);
+        const V G = exp_row(power, *ek);
         const V og = o * G;
-        const V alpha_raw = og < T(kAlphaMax) ? og : V{} + T(kAlphaMax);
+        const V alpha_raw = lane_min(og, V{} + T(kAlphaMax));  // og < 0.99 ? og : 0.99
         V alpha = alpha_raw;
         V d_alpha_raw_scale = V{} + T(1), d_power_extra_scale{};
         M ok;
@@ -310,27 +315,44 @@ void backward_tile(const Binning<T>& bin, int tile, const T bg[3], bool clamp_pa
         const V one_m = T(1) - alpha;
         const V inv_one_m = T(1) / one_m;
         const V t_before = Tc[k] * inv_one_m;
-        const V w = alpha * t_before;
-        const V g_alpha = fmadd(
-            t_before,
-            fmadd(sr - ar[k], gr[k], fmadd(sg - ag[k], gg[k], fmadd(sb - ab[k], gb[k], (sz - ad[k]) * gd[k]))),
-            tgb[k] * inv_one_m);
-        ar[k] = ok ? fmadd(alpha, V{} + sr, one_m * ar[k]) : ar[k];
-        ag[k] = ok ? fmadd(alpha, V{} + sg, one_m * ag[k]) : ag[k];
-        ab[k] = ok ? fmadd(alpha, V{} + sb, one_m * ab[k]) : ab[k];
-        ad[k] = ok ? fmadd(alpha, V{} + sz, one_m * ad[k]) : ad[k];
-        Tc[k] = ok ? t_before : Tc[k];
-        const V wk = ok ? w : V{};
-        v_r = fmadd(wk, gr[k], v_r);
-        v_g = fmadd(wk, gg[k], v_g);
-        v_b = fmadd(wk, gb[k], v_b);
-        v_z = fmadd(wk, gd[k], v_z);
+        const V wk = select_or_zero(ok, alpha * t_before);
+        // Per channel (depth, blue, green, red: the nesting order of the sum below), so that each
+        // channel's loads die at once (fewer spills): d out / d alpha's sum over the channels,
+        // sum_c (colour_c - behind_c) grad_c, the colour gradient w grad_c, and the colour behind this
+        // Gaussian updated to include it.
+        V d_behind;
+        {
+          const V g = gd[k], a = ad[k];
+          d_behind = (sz - a) * g;
+          v_z = fmadd(wk, g, v_z);
+          ad[k] = select(ok, fmadd(alpha, vz, one_m * a), a);
+        }
+        {
+          const V g = gb[k], a = ab[k];
+          d_behind = fmadd(sb - a, g, d_behind);
+          v_b = fmadd(wk, g, v_b);
+          ab[k] = select(ok, fmadd(alpha, vb, one_m * a), a);
+        }
+        {
+          const V g = gg[k], a = ag[k];
+          d_behind = fmadd(sg - a, g, d_behind);
+          v_g = fmadd(wk, g, v_g);
+          ag[k] = select(ok, fmadd(alpha, vg, one_m * a), a);
+        }
+        {
+          const V g = gr[k], a = ar[k];
+          d_behind = fmadd(sr - a, g, d_behind);
+          v_r = fmadd(wk, g, v_r);
+          ar[k] = select(ok, fmadd(alpha, vr, one_m * a), a);
+        }
+        const V g_alpha = fmadd(t_before, d_behind, tgb[k] * inv_one_m);
+        Tc[k] = select(ok, t_before, Tc[k]);
         // alpha_raw = min(0.99, o G): the lane-wise alpha_clamp_gradient_passes of raster_math.hpp (no gradient
         // through an active clamp, unless the original's pass-through rule is chosen).
         const M passes = clamp_pass_through ? ok : ok & (og < T(kAlphaMax));
-        const V d_og = passes ? g_alpha * d_alpha_raw_scale : V{};
+        const V d_og = select_or_zero(passes, g_alpha * d_alpha_raw_scale);
         V d_pow = d_og * og;
-        if constexpr (Smooth) d_pow += ok ? g_alpha * d_power_extra_scale : V{};
+        if constexpr (Smooth) d_pow += select_or_zero(ok, g_alpha * d_power_extra_scale);
         v_o = fmadd(d_og, G, v_o);
         const V d_pow_dx = d_pow * dx;
         a_x += d_pow_dx;
@@ -342,17 +364,20 @@ void backward_tile(const Binning<T>& bin, int tile, const T bg[3], bool clamp_pa
     }
     // Lane sums in a fixed order.
     T* out = isect_grads + static_cast<std::size_t>(begin + jl) * kIsectGradStride;
-    const T sx = sum_lanes(a_x), sy = sum_lanes(a_y);
+    T sums[8];
+    sum_lanes4(a_x, a_y, a_xx, a_xy, sums);
+    sum_lanes4(v_r, v_g, v_b, v_z, sums + 4);
+    const T sx = sums[0], sy = sums[1];
     out[0] = -(qa * sx + qb * sy);
     out[1] = -(qb * sx + qc * sy);
-    out[2] = T(-0.5) * sum_lanes(a_xx);
-    out[3] = -sum_lanes(a_xy);
+    out[2] = T(-0.5) * sums[2];
+    out[3] = -sums[3];
     out[4] = T(-0.5) * sum_lanes(a_yy);
     out[5] = sum_lanes(v_o);
-    out[6] = sum_lanes(v_r);
-    out[7] = sum_lanes(v_g);
-    out[8] = sum_lanes(v_b);
-    out[9] = sum_lanes(v_z);
+    out[6] = sums[4];
+    out[7] = sums[5];
+    out[8] = sums[6];
+    out[9] = sums[7];
   }
   // Intersections past the tile's last contributor get no gradient.
   const int count = bin.tile_offsets[tile + 1] - begin;

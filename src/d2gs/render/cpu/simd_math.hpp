@@ -72,31 +72,106 @@ D2GS_TILE_INLINE Row<double>::V fmadd(Row<double>::V a, Row<double>::V b, Row<do
 #endif
 }
 
+// a > b ? a : b and a < b ? a : b, lane-wise, with the ternaries' exact results (for a NaN or two zeros
+// of either sign, b): what MAXPS/MINPS compute, so one instruction where the target has them (GCC does
+// not turn the ternaries into them without -ffinite-math-only -fno-signed-zeros).
+template <typename V>
+D2GS_TILE_INLINE V lane_max(V a, V b) {
+#if defined(__AVX512F__)
+  if constexpr (sizeof(V) == 64 && sizeof(a[0]) == 4) return _mm512_maskz_max_ps(__mmask16(0xFFFF), a, b);  // not _mm512_max_ps: GCC 12 warns inside it
+  if constexpr (sizeof(V) == 64 && sizeof(a[0]) == 8) return _mm512_maskz_max_pd(__mmask8(0xFF), a, b);
+#endif
+#if defined(__AVX__)
+  if constexpr (sizeof(V) == 32 && sizeof(a[0]) == 4) return _mm256_max_ps(a, b);
+  if constexpr (sizeof(V) == 32 && sizeof(a[0]) == 8) return _mm256_max_pd(a, b);
+#endif
+#if defined(__SSE2__)
+  if constexpr (sizeof(V) == 16 && sizeof(a[0]) == 4) return _mm_max_ps(a, b);
+  if constexpr (sizeof(V) == 16 && sizeof(a[0]) == 8) return _mm_max_pd(a, b);
+#endif
+  return a > b ? a : b;
+}
+template <typename V>
+D2GS_TILE_INLINE V lane_min(V a, V b) {
+#if defined(__AVX512F__)
+  if constexpr (sizeof(V) == 64 && sizeof(a[0]) == 4) return _mm512_maskz_min_ps(__mmask16(0xFFFF), a, b);  // not _mm512_min_ps: GCC 12 warns inside it
+  if constexpr (sizeof(V) == 64 && sizeof(a[0]) == 8) return _mm512_maskz_min_pd(__mmask8(0xFF), a, b);
+#endif
+#if defined(__AVX__)
+  if constexpr (sizeof(V) == 32 && sizeof(a[0]) == 4) return _mm256_min_ps(a, b);
+  if constexpr (sizeof(V) == 32 && sizeof(a[0]) == 8) return _mm256_min_pd(a, b);
+#endif
+#if defined(__SSE2__)
+  if constexpr (sizeof(V) == 16 && sizeof(a[0]) == 4) return _mm_min_ps(a, b);
+  if constexpr (sizeof(V) == 16 && sizeof(a[0]) == 8) return _mm_min_pd(a, b);
+#endif
+  return a < b ? a : b;
+}
+
+// m ? a : b and m ? a : 0, lane-wise, for masks whose lanes are all ones or zero (every mask the tile
+// loops build): a blend (or an AND) on the mask as it is, where GCC's generic lowering of the vector
+// ternary first normalises the mask with two compares against zero. Same lanes as the ternaries.
+template <typename M, typename V>
+D2GS_TILE_INLINE V select(M m, V a, V b) {
+  static_assert(sizeof(M) == sizeof(V));
+#if defined(__AVX__) && !defined(__AVX512F__)
+  if constexpr (sizeof(V) == 32) return std::bit_cast<V>(_mm256_blendv_ps(std::bit_cast<__m256>(b), std::bit_cast<__m256>(a), std::bit_cast<__m256>(m)));
+#endif
+#if defined(__SSE2__) && !defined(__AVX__)
+  if constexpr (sizeof(V) == 16) {
+    const __m128i mi = std::bit_cast<__m128i>(m);
+    return std::bit_cast<V>(_mm_or_si128(_mm_and_si128(mi, std::bit_cast<__m128i>(a)), _mm_andnot_si128(mi, std::bit_cast<__m128i>(b))));
+  }
+#endif
+  return m ? a : b;
+}
+template <typename M, typename V>
+D2GS_TILE_INLINE V select_or_zero(M m, V a) {
+  static_assert(sizeof(M) == sizeof(V));
+  return std::bit_cast<V>(m & std::bit_cast<M>(a));
+}
+
 // exp of every lane for x <= 0 in float, about 1 ulp (Cephes-style range reduction x = n ln2 + r with a
 // degree-6 polynomial). Inputs below -80 return exp(-80) (~1.8e-35): callers multiply by an opacity
 // >= 1/255 and compare with 1/255, so the result is "0" for them, and products stay far from the
 // denormal range (denormal operands cost ~100 cycles each and made the tile loops 20x slower).
-D2GS_TILE_INLINE Row<float>::V exp_row(Row<float>::V x) {
+// The constants of exp_row as whole vectors in memory. The tile loops reach them through a pointer the
+// compiler cannot see through (exp_constants()), so that each is an instruction's memory operand: GCC
+// otherwise broadcasts every scalar constant into a register anew on each use once registers run out.
+struct alignas(64) ExpConstants {
+  Row<float>::V lo, hi, log2e, round, ln2_hi, ln2_lo, c0, c1, c2, c3, c4, c5, one;
+};
+static constexpr ExpConstants kExpConstants = {
+    Row<float>::V{} - 80.0f, Row<float>::V{} + 88.0f, Row<float>::V{} + 1.44269504088896341f,
+    Row<float>::V{} + 12582912.0f, Row<float>::V{} - 0.693359375f, Row<float>::V{} + 2.12194440e-4f,
+    Row<float>::V{} + 1.9875691500e-4f, Row<float>::V{} + 1.3981999507e-3f, Row<float>::V{} + 8.3334519073e-3f,
+    Row<float>::V{} + 4.1665795894e-2f, Row<float>::V{} + 1.6666665459e-1f, Row<float>::V{} + 5.0000001201e-1f,
+    Row<float>::V{} + 1.0f};
+D2GS_TILE_INLINE const ExpConstants* exp_constants() {
+  const ExpConstants* p = &kExpConstants;
+  asm("" : "+r"(p));
+  return p;
+}
+D2GS_TILE_INLINE Row<float>::V exp_row(Row<float>::V x, const ExpConstants& k = kExpConstants) {
   using V = Row<float>::V;
   using M = Row<float>::M;
-  x = x < -80.0f ? V{} - 80.0f : x;
-  x = x > 88.0f ? V{} + 88.0f : x;
-  constexpr float kRound = 12582912.0f;  // 1.5 * 2^23: adding and subtracting rounds to an integer
-  const V n = fmadd(x, V{} + 1.44269504088896341f, V{} + kRound) - kRound;
-  V r = fmadd(n, V{} - 0.693359375f, x);
-  r = fmadd(n, V{} + 2.12194440e-4f, r);
+  x = lane_max(k.lo, x);  // x < -80 ? -80 : x
+  x = lane_min(k.hi, x);  // x > 88 ? 88 : x
+  const V n = fmadd(x, k.log2e, k.round) - k.round;  // 1.5 * 2^23: adding and subtracting rounds to an integer
+  V r = fmadd(n, k.ln2_hi, x);
+  r = fmadd(n, k.ln2_lo, r);
   const V r2 = r * r;
-  V p = V{} + 1.9875691500e-4f;
-  p = fmadd(p, r, V{} + 1.3981999507e-3f);
-  p = fmadd(p, r, V{} + 8.3334519073e-3f);
-  p = fmadd(p, r, V{} + 4.1665795894e-2f);
-  p = fmadd(p, r, V{} + 1.6666665459e-1f);
-  p = fmadd(p, r, V{} + 5.0000001201e-1f);
-  const V y = fmadd(p, r2, r) + 1.0f;
+  V p = k.c0;
+  p = fmadd(p, r, k.c1);
+  p = fmadd(p, r, k.c2);
+  p = fmadd(p, r, k.c3);
+  p = fmadd(p, r, k.c4);
+  p = fmadd(p, r, k.c5);
+  const V y = fmadd(p, r2, r) + k.one;
   const M bits = (__builtin_convertvector(n, M) + 127) << 23;
   return y * std::bit_cast<V>(bits);
 }
-D2GS_TILE_INLINE Row<double>::V exp_row(Row<double>::V x) {
+D2GS_TILE_INLINE Row<double>::V exp_row(Row<double>::V x, const ExpConstants& = kExpConstants) {
   for (int k = 0; k < Row<double>::kLanes; ++k) x[k] = std::exp(x[k]);
   return x;
 }
@@ -153,6 +228,13 @@ template <typename M>
 D2GS_TILE_INLINE bool any_lane(M m) {
 #if defined(__AVX512F__)
   if constexpr (sizeof(M) == 64 && sizeof(m[0]) == 4) return _mm512_test_epi32_mask((__m512i)m, (__m512i)m) != 0;
+  if constexpr (sizeof(M) == 64 && sizeof(m[0]) == 8) return _mm512_test_epi64_mask((__m512i)m, (__m512i)m) != 0;
+#endif
+#if defined(__AVX__)
+  if constexpr (sizeof(M) == 32) return !_mm256_testz_si256((__m256i)m, (__m256i)m);
+#endif
+#if defined(__SSE2__)
+  if constexpr (sizeof(M) == 16) return _mm_movemask_epi8((__m128i)m) != 0;
 #endif
   std::int64_t acc = 0;
   for (int k = 0; k < int(sizeof(M) / sizeof(m[0])); ++k) acc |= m[k];
@@ -162,12 +244,7 @@ D2GS_TILE_INLINE bool any_lane(M m) {
 // Number of set lanes (lanes are 0 or -1).
 template <typename M>
 D2GS_TILE_INLINE int count_lanes(M m) {
-#if defined(__AVX512F__)
-  if constexpr (sizeof(M) == 64 && sizeof(m[0]) == 4) return __builtin_popcount(_mm512_test_epi32_mask((__m512i)m, (__m512i)m));
-#endif
-  int n = 0;
-  for (int k = 0; k < int(sizeof(M) / sizeof(m[0])); ++k) n -= int(m[k]);
-  return n;
+  return std::popcount(lane_bits(m));
 }
 
 // Sum of the lanes in a fixed pairwise order (halves added until one lane is left): the same order on
@@ -193,6 +270,33 @@ D2GS_TILE_INLINE auto sum_lanes(V v) {
     return v[0] + v[1];
   } else {
     return v[0];
+  }
+}
+
+// sum_lanes of four vectors at once, bit for bit the same four results: for eight float lanes the
+// halves of two vectors are added in one vector addition, then the pairs (h0 + h2, h1 + h3) of four, then
+// their sums, instead of three shuffle-and-add rounds per vector.
+template <typename V>
+D2GS_TILE_INLINE void sum_lanes4(V a, V b, V c, V d, decltype(a[0] + 0) out[4]) {
+  if constexpr (sizeof(V) / sizeof(a[0]) == 8 && sizeof(a[0]) == 4) {
+    const V sab = __builtin_shufflevector(a, b, 0, 1, 2, 3, 8, 9, 10, 11) +
+                  __builtin_shufflevector(a, b, 4, 5, 6, 7, 12, 13, 14, 15);  // a lo + hi | b lo + hi
+    const V scd = __builtin_shufflevector(c, d, 0, 1, 2, 3, 8, 9, 10, 11) +
+                  __builtin_shufflevector(c, d, 4, 5, 6, 7, 12, 13, 14, 15);
+    // h0 + h2, h1 + h3 of a, c | of b, d
+    const V u = __builtin_shufflevector(sab, scd, 0, 1, 8, 9, 4, 5, 12, 13) +
+                __builtin_shufflevector(sab, scd, 2, 3, 10, 11, 6, 7, 14, 15);
+    const V w = __builtin_shufflevector(u, u, 0, 2, 4, 6, 0, 2, 4, 6) +
+                __builtin_shufflevector(u, u, 1, 3, 5, 7, 1, 3, 5, 7);  // a, c, b, d
+    out[0] = w[0];
+    out[1] = w[2];
+    out[2] = w[1];
+    out[3] = w[3];
+  } else {
+    out[0] = sum_lanes(a);
+    out[1] = sum_lanes(b);
+    out[2] = sum_lanes(c);
+    out[3] = sum_lanes(d);
   }
 }
 
