@@ -347,9 +347,9 @@ double max_cost_entry(const CostMatrix& cost, int threads) {
 //   γ = argmin ‖F_k − ΔF γ‖₂,   ψ_{k+1} = G(ψ_k) − ΔG γ
 // (ΔF, ΔG: differences of successive residuals and images). The small least-squares problem is solved by its
 // normal equations with a relative Tikhonov term; all sums run serially in a fixed order (deterministic). The
-// history restarts when the residual grows well above the smallest one since the last restart (the
-// extrapolation has left the region where the map is nearly linear) and when the Gram matrix is too badly
-// conditioned for the solve.
+// history restarts (the step is then the plain one, ψ_{k+1} = G(ψ_k)) when the largest entry of the residual
+// exceeds twice the smallest such value since the last restart (the extrapolation has left the region where the
+// map is nearly linear) and when the Gram matrix is not positive definite in floating point.
 class Anderson {
 public:
   Anderson(std::size_t depth, std::size_t size) : depth_(depth), size_(size) {}
@@ -358,6 +358,7 @@ public:
     has_previous_ = false;
     best_ = std::numeric_limits<double>::infinity();
   }
+  int restarts() const { return restarts_; }
   // x: the current iterate ψ_k, replaced by ψ_{k+1}; g = G(ψ_k).
   void step(std::vector<double>& x, const std::vector<double>& g) {
     if (depth_ == 0) {
@@ -371,13 +372,18 @@ public:
       previous_f_.resize(size_);
       f_.resize(size_);
     }
-    double norm = 0.0;
+    double largest = 0.0;
     for (std::size_t k = 0; k < size_; ++k) {
       f_[k] = g[k] - x[k];
-      norm += f_[k] * f_[k];
+      largest = std::max(largest, std::abs(f_[k]));
     }
-    if (norm > 100.0 * best_) reset();  // ‖F‖ grew tenfold: restart from the plain step
-    best_ = std::min(best_, norm);
+    // Safeguard: the largest residual entry (what the stopping rule looks at) has doubled over the best since
+    // the last restart: the extrapolation has gone astray, restart from the plain step.
+    if (largest > 2.0 * best_) {
+      reset();
+      ++restarts_;
+    }
+    best_ = std::min(best_, largest);
     if (has_previous_) {
       const std::size_t slot = (head_ + count_) % depth_;
       if (count_ == depth_) head_ = (head_ + 1) % depth_;
@@ -446,6 +452,7 @@ public:
 
 private:
   std::size_t depth_, size_, count_ = 0, head_ = 0;
+  int restarts_ = 0;
   bool has_previous_ = false;
   double best_ = std::numeric_limits<double>::infinity();
   std::vector<std::vector<double>> dg_, df_;
@@ -552,7 +559,9 @@ SinkhornResult sinkhorn(std::span<const double> a, std::span<const double> b, co
       }
       if (accelerate) {
         ++stage.accelerated;
+        const int restarts = anderson.restarts();
         anderson.step(psi, psi_next);  // ψ ← the extrapolation from ψ and its plain update
+        stage.restarts += anderson.restarts() - restarts;
       } else {
         psi.swap(psi_next);
       }

@@ -98,6 +98,7 @@ struct SinkhornStage {
   double epsilon = 0.0;
   int iterations = 0;
   int accelerated = 0;   // of which followed by an Anderson step
+  int restarts = 0;      // Anderson restarts by the safeguard
   double seconds = 0.0;
 };
 
