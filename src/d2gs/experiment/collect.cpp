@@ -48,7 +48,10 @@ void group_imr(GroupRow& row, const std::vector<const RunSpec*>& members, const 
   const nlohmann::json solver = {{"epsilon", o.sinkhorn.epsilon},
                                  {"tolerance", o.sinkhorn.tolerance},
                                  {"max_iterations", o.sinkhorn.max_iterations},
-                                 {"epsilon_scaling", o.sinkhorn.epsilon_scaling}};
+                                 {"epsilon_scaling", o.sinkhorn.epsilon_scaling},
+                                 {"epsilon_factor", o.sinkhorn.epsilon_factor},
+                                 {"stage_tolerance", o.sinkhorn.stage_tolerance},
+                                 {"anderson_depth", o.sinkhorn.anderson_depth}};
   const auto note_unconverged = [&row](const nlohmann::json& pairs) {
     int unconverged = 0;
     for (const auto& p : pairs) unconverged += p.at("converged").get<bool>() ? 0 : 1;
