@@ -110,6 +110,7 @@ TEST(ImrCli, OptionsAreCheckedBeforeTheModelsAreLoaded) {
            {"--anderson -1", "--anderson must be in [0, 100]"},
            {"--epsilon-factor 1", "--epsilon-factor must be in (0, 1)"},
            {"--stage-tolerance 0", "--stage-tolerance must be positive"},
+           {"--plain-solver --accelerated", "exclude each other"},
            {"-s somewhere -r 3", "1, 2, 4 or 8"}}) {
     const auto r = test::run_cli("imr " + models + " " + option);
     EXPECT_EQ(r.exit_code, 1) << option << "\n" << r.output;

@@ -347,9 +347,11 @@ double max_cost_entry(const CostMatrix& cost, int threads) {
 //   γ = argmin ‖F_k − ΔF γ‖₂,   ψ_{k+1} = G(ψ_k) − ΔG γ
 // (ΔF, ΔG: differences of successive residuals and images). The small least-squares problem is solved by its
 // normal equations with a relative Tikhonov term; all sums run serially in a fixed order (deterministic). The
-// history restarts (the step is then the plain one, ψ_{k+1} = G(ψ_k)) when the largest entry of the residual
-// exceeds twice the smallest such value since the last restart (the extrapolation has left the region where the
-// map is nearly linear) and when the Gram matrix is not positive definite in floating point.
+// history restarts when the largest entry of the residual exceeds twice the smallest one in this stage (the
+// extrapolation has left the region where the map is nearly linear: the next iterate is then the plain step from
+// the best iterate, G(ψ_best), whose residual becomes the new reference), and when the Gram matrix is not
+// positive definite in floating point (the plain step ψ_{k+1} = G(ψ_k)). After 5 safeguard restarts in a stage
+// the solver iterates plain for the rest of the stage.
 class Anderson {
 public:
   Anderson(std::size_t depth, std::size_t size) : depth_(depth), size_(size) {}
@@ -377,13 +379,20 @@ public:
       f_[k] = g[k] - x[k];
       largest = std::max(largest, std::abs(f_[k]));
     }
-    // Safeguard: the largest residual entry (what the stopping rule looks at) has doubled over the best since
-    // the last restart: the extrapolation has gone astray, restart from the plain step.
+    // Safeguard: the largest residual entry (what the stopping rule looks at) has doubled over the best in this
+    // stage: the extrapolation has gone astray. Restart the history from the plain step of the best iterate.
     if (largest > 2.0 * best_) {
-      reset();
+      count_ = 0;
+      has_previous_ = false;
       ++restarts_;
+      x = best_g_;
+      best_ = std::numeric_limits<double>::infinity();  // the next residual is the new reference (no livelock)
+      return;
     }
-    best_ = std::min(best_, largest);
+    if (largest < best_) {
+      best_ = largest;
+      best_g_ = g;
+    }
     if (has_previous_) {
       const std::size_t slot = (head_ + count_) % depth_;
       if (count_ == depth_) head_ = (head_ + 1) % depth_;
@@ -456,7 +465,7 @@ private:
   bool has_previous_ = false;
   double best_ = std::numeric_limits<double>::infinity();
   std::vector<std::vector<double>> dg_, df_;
-  std::vector<double> previous_g_, previous_f_, f_;
+  std::vector<double> previous_g_, previous_f_, f_, best_g_;
 };
 
 SinkhornResult sinkhorn(std::span<const double> a, std::span<const double> b, const CostMatrix& cost,
@@ -516,6 +525,7 @@ SinkhornResult sinkhorn(std::span<const double> a, std::span<const double> b, co
     // Anderson acceleration in this stage until, in the last stage, an iteration has reached the tolerance;
     // then plain iterations decide the stop.
     bool accelerate = options.anderson_depth > 0;
+    constexpr int kMaxRestarts = 5;
     anderson.reset();
     while (result.iterations < options.max_iterations) {
 #pragma omp parallel num_threads(threads)
@@ -562,6 +572,9 @@ SinkhornResult sinkhorn(std::span<const double> a, std::span<const double> b, co
         const int restarts = anderson.restarts();
         anderson.step(psi, psi_next);  // ψ ← the extrapolation from ψ and its plain update
         stage.restarts += anderson.restarts() - restarts;
+        // Extrapolation keeps failing in this stage: plain iterations for the rest of it (never much worse
+        // than the plain solver).
+        if (stage.restarts >= kMaxRestarts) accelerate = false;
       } else {
         psi.swap(psi_next);
       }

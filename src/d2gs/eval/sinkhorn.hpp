@@ -87,7 +87,8 @@ struct SinkhornOptions {
   // change and the tolerance of the current stage: progress for long solves. Not called when empty.
   std::function<void(int iteration, double change, double tolerance)> on_iteration = nullptr;
   // Anderson acceleration (Walker & Ni 2011) of the map ψ ↦ (one plain iteration from ψ), with this many past
-  // iterates (0: off, plain Sinkhorn). Same fixed point; restarted at each ε stage. In the last stage, once an
+  // iterates (0: off, plain Sinkhorn). Same fixed point; restarted at each ε stage, and plain for the rest of a
+  // stage after 5 safeguard restarts in it (sinkhorn.cpp, class Anderson). In the last stage, once an
   // iteration changes the potentials by less than `tolerance`, the solve goes on with plain iterations until one
   // of them does too: the stopping rule of the plain solver.
   int anderson_depth = 0;
