@@ -2,7 +2,7 @@
 //   bench_imr --benchmark_filter=10000 --benchmark_repetitions=3
 // One pair of random 10 000-component mixtures in a scene-like frame, ε = 0.1 on the mean-normalised release
 // cost, tolerance 1e-4: time of cost preparation + solve, for the stored (float, double) and on-the-fly
-// cost; the default solver (ε-scaling + Anderson acceleration) and the plain one (d2gs imr --plain-solver).
+// cost; the default (plain) solver and the accelerated one (d2gs imr --accelerated: Anderson, ε ÷4).
 // With D2GS_IMR_BENCH_DIR set, the two models are read from the .npy files that
 // tools/bench_pot_sinkhorn.py writes there (a_means.npy, ...), so POT and d2gs solve the same pair.
 #include <cstdio>
@@ -63,11 +63,7 @@ void BM_ImrPair(benchmark::State& state) {
   d2gs::ImrOptions options;  // the defaults of d2gs imr
   options.storage = storage;
   options.sinkhorn.epsilon_scaling = scaling;
-  if (plain) {  // the solver before Anderson acceleration (d2gs imr --plain-solver)
-    options.sinkhorn.anderson_depth = 0;
-    options.sinkhorn.epsilon_factor = 0.5;
-    options.sinkhorn.stage_tolerance = 1e-2;
-  }
+  if (!plain) d2gs::use_accelerated_solver(options.sinkhorn);  // d2gs imr --accelerated
   d2gs::TransportResult t;
   for (auto _ : state) {
     t = d2gs::mixture_transport(a, b, options);
@@ -80,8 +76,8 @@ void BM_ImrPair(benchmark::State& state) {
                  (plain ? ", plain iterations" : ", Anderson"));
 }
 
-// (n, storage, ε-scaling, Anderson): every storage with the defaults (ε-scaling, Anderson), the stored float cost
-// without ε-scaling, and the plain solver (--plain-solver) with and without ε-scaling.
+// (n, storage, ε-scaling, accelerated): every storage with the accelerated solver, the stored float cost without
+// ε-scaling, and the default plain solver with and without ε-scaling.
 void args(benchmark::internal::Benchmark* b) {
   for (const int n : {2000, 10000}) {
     for (const auto s : {d2gs::CostStorage::StoredFloat, d2gs::CostStorage::StoredDouble, d2gs::CostStorage::OnTheFly})
