@@ -124,6 +124,41 @@ TEST(Imr, IdenticalModelsGiveTheEntropicFloorAndZeroDebiased) {
   EXPECT_LT(t_small.transport_cost, 0.2 * t.transport_cost);
 }
 
+TEST(Imr, AcceleratedSolverMatchesThePlainOne) {
+  // The accelerated solver (Anderson, ε ÷4 per stage) against the default (plain, ε halved): same S.
+  for (const unsigned seed : {5u, 6u}) {
+    const GaussianMixture a = random_mixture(400, seed), b = random_mixture(380, seed + 100);
+    ImrOptions fast;
+    use_accelerated_solver(fast.sinkhorn);
+    const ImrOptions plain;  // the default
+    ImrOptions tight = plain;  // the converged value
+    tight.sinkhorn.tolerance = 1e-6;
+    tight.storage = CostStorage::StoredDouble;
+    const TransportResult f = mixture_transport(a, b, fast), p = mixture_transport(a, b, plain),
+                          t = mixture_transport(a, b, tight);
+    ASSERT_TRUE(f.converged);
+    ASSERT_TRUE(p.converged);
+    ASSERT_TRUE(t.converged);
+    EXPECT_NEAR(f.transport_cost, t.transport_cost, 1e-5 * t.transport_cost);
+    EXPECT_NEAR(f.transport_cost, p.transport_cost, 1e-4 * p.transport_cost);
+    EXPECT_LE(f.iterations, p.iterations);
+    EXPECT_LT(f.marginal_error, 1e-4);
+  }
+  // Identical models converge to the floor with the accelerated solver too.
+  const GaussianMixture a = random_mixture(350, 8);
+  ImrOptions plain;
+  plain.sinkhorn.anderson_depth = 0;
+  plain.sinkhorn.tolerance = 1e-6;
+  plain.storage = CostStorage::StoredDouble;
+  ImrOptions fast;
+  use_accelerated_solver(fast.sinkhorn);
+  const TransportResult self_fast = mixture_transport(a, a, fast), self_plain = mixture_transport(a, a, plain);
+  EXPECT_TRUE(self_fast.converged);
+  EXPECT_LT(self_fast.last_change, 1e-4);
+  EXPECT_GT(self_fast.transport_cost, 0.0);
+  EXPECT_NEAR(self_fast.transport_cost, self_plain.transport_cost, 1e-5 * self_plain.transport_cost);
+}
+
 TEST(Imr, ShiftedCopyCostsTheSquaredShift) {
   // Translation by v is an optimal map for the quadratic cost, and for matched components the shape term
   // is 0, so the unregularised transport cost is exactly ‖v‖². With well separated components (spacing

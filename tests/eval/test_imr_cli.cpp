@@ -107,6 +107,10 @@ TEST(ImrCli, OptionsAreCheckedBeforeTheModelsAreLoaded) {
            {"--reference-camera -2", "--reference-camera"},
            {"--threads -1", "--threads"},
            {"--cost sparse", "--cost"},
+           {"--anderson -1", "--anderson must be in [0, 100]"},
+           {"--epsilon-factor 1", "--epsilon-factor must be in (0, 1)"},
+           {"--stage-tolerance 0", "--stage-tolerance must be positive"},
+           {"--plain-solver --accelerated", "exclude each other"},
            {"-s somewhere -r 3", "1, 2, 4 or 8"}}) {
     const auto r = test::run_cli("imr " + models + " " + option);
     EXPECT_EQ(r.exit_code, 1) << option << "\n" << r.output;

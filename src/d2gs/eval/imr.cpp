@@ -256,8 +256,17 @@ TransportResult mixture_transport(const GaussianMixture& source, const GaussianM
   t.marginal_error = solved.marginal_error;
   t.last_change = solved.last_change;
   t.converged = solved.converged;
+  t.stages = solved.stages;
   t.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return t;
+}
+
+std::string stage_summary(const TransportResult& t) {
+  std::string out;
+  for (const SinkhornStage& s : t.stages)
+    out += fmt::format("{}{:.4g}: {} ({} accelerated, {} restarts), {:.2f} s", out.empty() ? "" : "; ", s.epsilon,
+                       s.iterations, s.accelerated, s.restarts, s.seconds);
+  return out;
 }
 
 double imr_from_distances(const std::vector<double>& distances) {
@@ -280,9 +289,11 @@ ImrResult compute_imr(const std::vector<GaussianMixture>& mixtures, const ImrOpt
   if (options.debiased) {
     for (std::size_t k = 0; k < mixtures.size(); ++k) {
       result.self.push_back(mixture_transport(mixtures[k], mixtures[k], options));
-      if (progress)
+      if (progress) {
         progress(fmt::format("S({0},{0}) = {1:.6g} ({2} iterations, {3:.2f} s)", k, result.self.back().transport_cost,
                              result.self.back().iterations, result.self.back().seconds));
+        progress("  ε stages: " + stage_summary(result.self.back()));
+      }
     }
   }
   std::vector<double> distances, debiased_roots, debiased_values;
@@ -301,9 +312,11 @@ ImrResult compute_imr(const std::vector<GaussianMixture>& mixtures, const ImrOpt
         debiased_values.push_back(clamped);
         debiased_roots.push_back(std::sqrt(clamped));
       }
-      if (progress)
+      if (progress) {
         progress(fmt::format("S({},{}) = {:.6g} ({} iterations, {:.2f} s)", a, b, pair.transport.transport_cost,
                              pair.transport.iterations, pair.transport.seconds));
+        progress("  ε stages: " + stage_summary(pair.transport));
+      }
       result.pairs.push_back(pair);
     }
   result.imr = imr_from_distances(distances);

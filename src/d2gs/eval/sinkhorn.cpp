@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <bit>
+#include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -341,6 +342,132 @@ double max_cost_entry(const CostMatrix& cost, int threads) {
 }
 }  // namespace
 
+// Anderson acceleration (type II, Walker & Ni 2011) of the fixed-point map ψ ↦ G(ψ), G = one plain Sinkhorn
+// iteration seen from ψ: with the residuals F_k = G(ψ_k) − ψ_k of the last `depth` iterates,
+//   γ = argmin ‖F_k − ΔF γ‖₂,   ψ_{k+1} = G(ψ_k) − ΔG γ
+// (ΔF, ΔG: differences of successive residuals and images). The small least-squares problem is solved by its
+// normal equations with a relative Tikhonov term; all sums run serially in a fixed order (deterministic). The
+// history restarts when the largest entry of the residual exceeds twice the smallest one in this stage (the
+// extrapolation has left the region where the map is nearly linear: the next iterate is then the plain step from
+// the best iterate, G(ψ_best), whose residual becomes the new reference), and when the Gram matrix is not
+// positive definite in floating point (the plain step ψ_{k+1} = G(ψ_k)). After 5 safeguard restarts in a stage
+// the solver iterates plain for the rest of the stage.
+class Anderson {
+public:
+  Anderson(std::size_t depth, std::size_t size) : depth_(depth), size_(size) {}
+  void reset() {
+    count_ = 0;
+    has_previous_ = false;
+    best_ = std::numeric_limits<double>::infinity();
+  }
+  int restarts() const { return restarts_; }
+  // x: the current iterate ψ_k, replaced by ψ_{k+1}; g = G(ψ_k).
+  void step(std::vector<double>& x, const std::vector<double>& g) {
+    if (depth_ == 0) {
+      x = g;
+      return;
+    }
+    if (dg_.empty()) {
+      dg_.assign(depth_, std::vector<double>(size_));
+      df_.assign(depth_, std::vector<double>(size_));
+      previous_g_.resize(size_);
+      previous_f_.resize(size_);
+      f_.resize(size_);
+    }
+    double largest = 0.0;
+    for (std::size_t k = 0; k < size_; ++k) {
+      f_[k] = g[k] - x[k];
+      largest = std::max(largest, std::abs(f_[k]));
+    }
+    // Safeguard: the largest residual entry (what the stopping rule looks at) has doubled over the best in this
+    // stage: the extrapolation has gone astray. Restart the history from the plain step of the best iterate.
+    if (largest > 2.0 * best_) {
+      count_ = 0;
+      has_previous_ = false;
+      ++restarts_;
+      x = best_g_;
+      best_ = std::numeric_limits<double>::infinity();  // the next residual is the new reference (no livelock)
+      return;
+    }
+    if (largest < best_) {
+      best_ = largest;
+      best_g_ = g;
+    }
+    if (has_previous_) {
+      const std::size_t slot = (head_ + count_) % depth_;
+      if (count_ == depth_) head_ = (head_ + 1) % depth_;
+      else ++count_;
+      for (std::size_t k = 0; k < size_; ++k) {
+        dg_[slot][k] = g[k] - previous_g_[k];
+        df_[slot][k] = f_[k] - previous_f_[k];
+      }
+    }
+    previous_g_ = g;
+    previous_f_ = f_;
+    has_previous_ = true;
+    if (count_ == 0) {
+      x = g;
+      return;
+    }
+    // Normal equations (ΔFᵀΔF + λI) γ = ΔFᵀF.
+    const std::size_t c = count_;
+    std::vector<double> a(c * c), rhs(c);
+    for (std::size_t p = 0; p < c; ++p) {
+      const std::vector<double>& fp = df_[(head_ + p) % depth_];
+      for (std::size_t q = 0; q <= p; ++q) {
+        const std::vector<double>& fq = df_[(head_ + q) % depth_];
+        double dot = 0.0;
+        for (std::size_t k = 0; k < size_; ++k) dot += fp[k] * fq[k];
+        a[p * c + q] = a[q * c + p] = dot;
+      }
+      double dot = 0.0;
+      for (std::size_t k = 0; k < size_; ++k) dot += fp[k] * f_[k];
+      rhs[p] = dot;
+    }
+    double trace = 0.0;
+    for (std::size_t p = 0; p < c; ++p) trace += a[p * c + p];
+    for (std::size_t p = 0; p < c; ++p) a[p * c + p] += 1e-10 * trace / static_cast<double>(c) + 1e-300;
+    // Cholesky.
+    for (std::size_t p = 0; p < c; ++p) {
+      for (std::size_t q = 0; q < p; ++q) {
+        double v = a[p * c + q];
+        for (std::size_t r = 0; r < q; ++r) v -= a[p * c + r] * a[q * c + r];
+        a[p * c + q] = v / a[q * c + q];
+      }
+      double d = a[p * c + p];
+      for (std::size_t r = 0; r < p; ++r) d -= a[p * c + r] * a[p * c + r];
+      if (!(d > 0.0)) {  // not positive definite in floating point: restart
+        reset();
+        x = g;
+        return;
+      }
+      a[p * c + p] = std::sqrt(d);
+    }
+    std::vector<double> gamma(rhs);
+    for (std::size_t p = 0; p < c; ++p) {
+      for (std::size_t r = 0; r < p; ++r) gamma[p] -= a[p * c + r] * gamma[r];
+      gamma[p] /= a[p * c + p];
+    }
+    for (std::size_t p = c; p-- > 0;) {
+      for (std::size_t r = p + 1; r < c; ++r) gamma[p] -= a[r * c + p] * gamma[r];
+      gamma[p] /= a[p * c + p];
+    }
+    for (std::size_t k = 0; k < size_; ++k) {
+      double v = g[k];
+      for (std::size_t p = 0; p < c; ++p) v -= gamma[p] * dg_[(head_ + p) % depth_][k];
+      x[k] = v;
+    }
+  }
+
+private:
+  std::size_t depth_, size_, count_ = 0, head_ = 0;
+  int restarts_ = 0;
+  bool has_previous_ = false;
+  double best_ = std::numeric_limits<double>::infinity();
+  std::vector<std::vector<double>> dg_, df_;
+  std::vector<double> previous_g_, previous_f_, f_, best_g_;
+};
+
 SinkhornResult sinkhorn(std::span<const double> a, std::span<const double> b, const CostMatrix& cost,
                         const SinkhornOptions& options) {
   const std::size_t n = cost.rows(), m = cost.cols();
@@ -350,6 +477,7 @@ SinkhornResult sinkhorn(std::span<const double> a, std::span<const double> b, co
   if (!(options.epsilon > 0.0)) fail("sinkhorn: epsilon must be positive, got {}", options.epsilon);
   if (!(options.tolerance >= 0.0)) fail("sinkhorn: tolerance must be non-negative, got {}", options.tolerance);
   if (options.max_iterations < 1) fail("sinkhorn: max iterations must be at least 1, got {}", options.max_iterations);
+  if (options.anderson_depth < 0) fail("sinkhorn: Anderson depth must be ≥ 0, got {}", options.anderson_depth);
   std::vector<double> log_a(n), log_b(m);
   for (std::size_t i = 0; i < n; ++i) {
     if (!(a[i] > 0.0) || !std::isfinite(a[i])) fail("sinkhorn: weight a[{}] = {} is not positive", i, a[i]);
@@ -376,20 +504,29 @@ SinkhornResult sinkhorn(std::span<const double> a, std::span<const double> b, co
   epsilons.push_back(options.epsilon);
 
   SinkhornResult result;
-  std::vector<double> phi(n, 0.0), psi(m, 0.0), dphi(n, 0.0), dpsi(m, 0.0);
+  std::vector<double> phi(n, 0.0), psi(m, 0.0), dphi(n, 0.0), dpsi(m, 0.0), psi_next(m, 0.0);
   Scratch scratch(threads, std::max(n, m));
+  Anderson anderson(static_cast<std::size_t>(std::max(0, options.anderson_depth)), m);
   double eps_prev = epsilons.front();
   for (const double eps : epsilons) {
+    const auto stage_start = std::chrono::steady_clock::now();
+    const bool last_stage = eps == epsilons.back();
     const double inv_eps = 1.0 / eps;
-    const double tolerance =
-        eps == epsilons.back() ? options.tolerance : std::max(options.tolerance, options.stage_tolerance);
+    const double tolerance = last_stage ? options.tolerance : std::max(options.tolerance, options.stage_tolerance);
     const double rescale = eps_prev / eps;  // keep f = εφ, g = εψ across stages
     for (auto& v : phi) v *= rescale;
     for (auto& v : psi) v *= rescale;
     eps_prev = eps;
     result.converged = false;
+    SinkhornStage stage;
+    stage.epsilon = eps;
     bool first = true;  // no previous log-sum-exp at this ε to shift by
     const double nan = std::numeric_limits<double>::quiet_NaN();
+    // Anderson acceleration in this stage until, in the last stage, an iteration has reached the tolerance;
+    // then plain iterations decide the stop.
+    bool accelerate = options.anderson_depth > 0;
+    constexpr int kMaxRestarts = 5;
+    anderson.reset();
     while (result.iterations < options.max_iterations) {
 #pragma omp parallel num_threads(threads)
       {
@@ -407,10 +544,11 @@ SinkhornResult sinkhorn(std::span<const double> a, std::span<const double> b, co
           const double guess = first ? nan : log_b[j] - psi[j];
           const double updated = log_b[j] - lse(cost.column(j, scratch.get()), phi.data(), inv_eps, n, precise, guess);
           dpsi[j] = std::abs(updated - psi[j]);
-          psi[j] = updated;
+          psi_next[j] = updated;
         }
       }
       ++result.iterations;
+      ++stage.iterations;
       first = false;
       double change = 0.0;
       for (const double d : dphi) change = std::max(change, d);
@@ -419,10 +557,30 @@ SinkhornResult sinkhorn(std::span<const double> a, std::span<const double> b, co
       result.last_change = change;
       if (options.on_iteration) options.on_iteration(result.iterations, change, tolerance);
       if (change < tolerance) {
+        if (accelerate && last_stage) {
+          // The solve ends on plain iterations: the plain solver's stopping rule.
+          accelerate = false;
+          psi.swap(psi_next);
+          continue;
+        }
+        psi.swap(psi_next);
         result.converged = true;
         break;
       }
+      if (accelerate) {
+        ++stage.accelerated;
+        const int restarts = anderson.restarts();
+        anderson.step(psi, psi_next);  // ψ ← the extrapolation from ψ and its plain update
+        stage.restarts += anderson.restarts() - restarts;
+        // Extrapolation keeps failing in this stage: plain iterations for the rest of it (never much worse
+        // than the plain solver).
+        if (stage.restarts >= kMaxRestarts) accelerate = false;
+      } else {
+        psi.swap(psi_next);
+      }
     }
+    stage.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - stage_start).count();
+    result.stages.push_back(stage);
     if (!result.converged) break;  // out of iterations: later stages are not run
   }
   result.epsilon = eps_prev;

@@ -86,6 +86,21 @@ struct SinkhornOptions {
   // Called after every iteration with the iteration count so far (over all ε stages), that iteration's
   // change and the tolerance of the current stage: progress for long solves. Not called when empty.
   std::function<void(int iteration, double change, double tolerance)> on_iteration = nullptr;
+  // Anderson acceleration (Walker & Ni 2011) of the map ψ ↦ (one plain iteration from ψ), with this many past
+  // iterates (0: off, plain Sinkhorn). Same fixed point; restarted at each ε stage, and plain for the rest of a
+  // stage after 5 safeguard restarts in it (sinkhorn.cpp, class Anderson). In the last stage, once an
+  // iteration changes the potentials by less than `tolerance`, the solve goes on with plain iterations until one
+  // of them does too: the stopping rule of the plain solver.
+  int anderson_depth = 0;
+};
+
+// One ε stage of a solve (diagnostics).
+struct SinkhornStage {
+  double epsilon = 0.0;
+  int iterations = 0;
+  int accelerated = 0;   // of which followed by an Anderson step
+  int restarts = 0;      // Anderson restarts by the safeguard
+  double seconds = 0.0;
 };
 
 struct SinkhornResult {
@@ -96,6 +111,7 @@ struct SinkhornResult {
   bool converged = false;       // last stage reached `tolerance` within `max_iterations`
   double epsilon = 0.0;         // the final ε
   std::vector<double> f, g;     // dual potentials in cost units (f = εφ, g = εψ)
+  std::vector<SinkhornStage> stages;  // one per ε stage run
 };
 
 // Solves the problem above. a and b must be positive (zero-mass components are not supported: drop them)
