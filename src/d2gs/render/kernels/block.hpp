@@ -54,6 +54,20 @@ D2GS_HD int blocks_for(long long n, int block = kBlockThreads) {
   return static_cast<int>((n + block - 1) / block);
 }
 
+// The commonest kernel: one thread per item, no shared memory, one phase; thread i < args.n runs
+// Item(i, args). Projection, SH, tile counts, key emission and Adam are this.
+template <class Args, void (*Item)(int, const Args&)>
+struct PerItemKernel {
+  struct Shared {};
+  template <class Block>
+  D2GS_HD static void run(Block& b, Shared&, const Args& a) {
+    b.threads([&](const Thread& t) {
+      const int i = t.global_x();
+      if (i < a.n) Item(i, a);
+    });
+  }
+};
+
 // The IEEE bits of a float (the sort keys order positive depths by these bits).
 D2GS_HD uint32_t float_bits(float v) {
 #if defined(__CUDA_ARCH__)

@@ -51,16 +51,7 @@ D2GS_HD void tile_count_thread(int i, const TileCountArgs& a) {
   a.offsets[i] = count;
 }
 
-struct TileCountKernel {
-  struct Shared {};
-  template <class Block>
-  D2GS_HD static void run(Block& b, Shared&, const TileCountArgs& a) {
-    b.threads([&](const Thread& t) {
-      const int i = t.global_x();
-      if (i < a.n) tile_count_thread(i, a);
-    });
-  }
-};
+using TileCountKernel = PerItemKernel<TileCountArgs, tile_count_thread>;
 
 struct EmitKeysArgs {
   int n = 0, tiles_x = 0;
@@ -86,16 +77,7 @@ D2GS_HD void emit_keys_thread(int i, const EmitKeysArgs& a) {
     }
 }
 
-struct EmitKeysKernel {
-  struct Shared {};
-  template <class Block>
-  D2GS_HD static void run(Block& b, Shared&, const EmitKeysArgs& a) {
-    b.threads([&](const Thread& t) {
-      const int i = t.global_x();
-      if (i < a.n) emit_keys_thread(i, a);
-    });
-  }
-};
+using EmitKeysKernel = PerItemKernel<EmitKeysArgs, emit_keys_thread>;
 
 struct TileRangesArgs {
   int m = 0;                        // intersections

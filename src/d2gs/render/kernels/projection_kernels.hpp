@@ -44,16 +44,7 @@ D2GS_HD void projection_fwd_thread(int i, const ProjectionFwdArgs& a) {
   }
 }
 
-struct ProjectionFwdKernel {
-  struct Shared {};
-  template <class Block>
-  D2GS_HD static void run(Block& b, Shared&, const ProjectionFwdArgs& a) {
-    b.threads([&](const Thread& t) {
-      const int i = t.global_x();
-      if (i < a.n) projection_fwd_thread(i, a);
-    });
-  }
-};
+using ProjectionFwdKernel = PerItemKernel<ProjectionFwdArgs, projection_fwd_thread>;
 
 struct ProjectionBwdArgs {
   int n = 0;
@@ -95,15 +86,6 @@ D2GS_HD void projection_bwd_thread(int i, const ProjectionBwdArgs& a) {
                        a.d_conic + i * 3, a.d_depth[i], dm, ds, dq);
 }
 
-struct ProjectionBwdKernel {
-  struct Shared {};
-  template <class Block>
-  D2GS_HD static void run(Block& b, Shared&, const ProjectionBwdArgs& a) {
-    b.threads([&](const Thread& t) {
-      const int i = t.global_x();
-      if (i < a.n) projection_bwd_thread(i, a);
-    });
-  }
-};
+using ProjectionBwdKernel = PerItemKernel<ProjectionBwdArgs, projection_bwd_thread>;
 
 }  // namespace d2gs::render::kernels

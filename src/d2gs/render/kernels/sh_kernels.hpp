@@ -35,16 +35,7 @@ D2GS_HD void sh_fwd_thread(int i, const ShFwdArgs& a) {
   for (int c = 0; c < 3; ++c) clamped[c] = cl[c] ? 1 : 0;
 }
 
-struct ShFwdKernel {
-  struct Shared {};
-  template <class Block>
-  D2GS_HD static void run(Block& b, Shared&, const ShFwdArgs& a) {
-    b.threads([&](const Thread& t) {
-      const int i = t.global_x();
-      if (i < a.n) sh_fwd_thread(i, a);
-    });
-  }
-};
+using ShFwdKernel = PerItemKernel<ShFwdArgs, sh_fwd_thread>;
 
 struct ShBwdArgs {
   int n = 0, active_degree = 0, rest_count = 0;
@@ -71,15 +62,6 @@ D2GS_HD void sh_bwd_thread(int i, const ShBwdArgs& a) {
                   a.d_color + i * 3, ddc, drest, a.d_means + i * 3);
 }
 
-struct ShBwdKernel {
-  struct Shared {};
-  template <class Block>
-  D2GS_HD static void run(Block& b, Shared&, const ShBwdArgs& a) {
-    b.threads([&](const Thread& t) {
-      const int i = t.global_x();
-      if (i < a.n) sh_bwd_thread(i, a);
-    });
-  }
-};
+using ShBwdKernel = PerItemKernel<ShBwdArgs, sh_bwd_thread>;
 
 }  // namespace d2gs::render::kernels

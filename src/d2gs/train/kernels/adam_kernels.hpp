@@ -29,15 +29,6 @@ D2GS_HD void adam_thread(int i, const AdamArgs& a) {
   a.param[i] -= a.s.step_size * a.exp_avg[i] / (sqrtf(a.exp_avg_sq[i]) * a.s.inv_sqrt_bias2 + a.s.eps);
 }
 
-struct AdamKernel {
-  struct Shared {};
-  template <class Block>
-  D2GS_HD static void run(Block& b, Shared&, const AdamArgs& a) {
-    b.threads([&](const Thread& t) {
-      const int i = t.global_x();
-      if (i < a.n) adam_thread(i, a);
-    });
-  }
-};
+using AdamKernel = render::kernels::PerItemKernel<AdamArgs, adam_thread>;
 
 }  // namespace d2gs::train_kernels
