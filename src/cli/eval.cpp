@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 
 #include "cli/commands.hpp"
+#include "cli/device_flag.hpp"
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/json_value.hpp"
@@ -73,8 +74,11 @@ Run add_eval_command(CLI::App& app) {
                   "Ground-truth images: as the run was trained (default, from its config.json), or 'folder' / "
                   "'largest' to score the same renders against another source (see d2gs train --image-source)")
       ->check(CLI::IsMember({"folder", "largest"}));
-  return [model_dir, iteration, json_only, lpips_weights, lpips_range, source, image_source]() -> int {
-    // Options first, so that a bad weights file fails before any rendering.
+  auto device = std::make_shared<std::string>();
+  add_device_flag(*cmd, *device);
+  return [model_dir, iteration, json_only, lpips_weights, lpips_range, source, image_source, device]() -> int {
+    // Options first, so that a bad weights file or device fails before any rendering.
+    const render::DeviceChoice backend = resolve_device_flag(*device);
     const LpipsInputRange range = parse_lpips_input_range(*lpips_range, "--lpips-input-range");
     std::optional<Lpips> lpips;
     if (!lpips_weights->empty()) lpips.emplace(Lpips::load(*lpips_weights));
@@ -115,7 +119,8 @@ Run add_eval_command(CLI::App& app) {
     const EvalSummary summary = evaluate_views(model, scene, test, eo);
     const nlohmann::json j = write_results_json(run, summary, scene,
                                                 {.method = c.method, .iteration = it, .gaussians = model.size(),
-                                                 .init_is_oracle = oracle, .train_seconds = std::nullopt});
+                                                 .init_is_oracle = oracle, .train_seconds = std::nullopt,
+                                                 .device = render::to_string(backend.device)});
     if (*json_only) std::printf("%s\n", j.dump(2).c_str());
     else std::printf("%s(%s, iteration %d, %zu Gaussians%s)\nwritten %s\n", format_table(summary).c_str(),
                      c.method.c_str(), it, model.size(), oracle ? ", ORACLE init" : "", (run / "results.json").c_str());

@@ -1,4 +1,5 @@
-// d2gs info: loads a scene's metadata (no image is decoded) and prints its cameras and split.
+// d2gs info: the backend --device auto would use; with -s, a scene's metadata (no image is decoded), its
+// cameras and split.
 #include <algorithm>
 #include <cstdio>
 #include <memory>
@@ -6,11 +7,15 @@
 #include <vector>
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 #include <nlohmann/json.hpp>
 
 #include "cli/commands.hpp"
 #include "cli/scene_flags.hpp"
 #include "d2gs/core/error.hpp"
+#include "d2gs/render/cpu/composite_tiles.hpp"
+#include "d2gs/render/cuda/device.hpp"
+#include "d2gs/render/device_choice.hpp"
 #include "d2gs/scene/scene.hpp"
 #include "d2gs/scene/split.hpp"
 
@@ -102,20 +107,56 @@ void print_table(const Scene& scene, const Split& split) {
   std::fputs(s.c_str(), stdout);
 }
 
+// The backends: what --device auto would use and why, the CPU's tile-loop levels, CUDA's state.
+nlohmann::ordered_json backend_json() {
+  const render::DeviceChoice choice = render::choose_device(render::DeviceRequest::Auto);
+  nlohmann::ordered_json j;
+  j["device"] = render::to_string(choice.device);
+  j["description"] = choice.description;
+  if (!choice.reason.empty()) j["reason"] = choice.reason;
+  j["cpu_tile_levels"] = render::cpu::available_tile_isas();
+  j["cuda_devices"] = cuda::device_count();
+  j["cuda_device"] = cuda::describe_device();
+  j["cuda_backend_complete"] = render::cuda_backend_complete();
+  return j;
+}
+
+void print_backend() {
+  const render::DeviceChoice choice = render::choose_device(render::DeviceRequest::Auto);
+  std::string s;
+  s += fmt::format("device      {} (what --device auto uses)\n", choice.description);
+  if (!choice.reason.empty()) s += fmt::format("            not CUDA: {}\n", choice.reason);
+  s += fmt::format("CPU levels  {} (D2GS_CPU_ISA picks one)\n", fmt::join(render::cpu::available_tile_isas(), ", "));
+  s += fmt::format("CUDA        {} device(s): {}\n", cuda::device_count(), cuda::describe_device());
+  std::fputs(s.c_str(), stdout);
+}
+
 }  // namespace
 
 Run add_info_command(CLI::App& app) {
   auto opts = std::make_shared<InfoOptions>();
-  auto* sub = app.add_subcommand("info", "Print a scene's format, cameras, sparse-view split and point count");
+  auto* sub = app.add_subcommand(
+      "info", "Print the backend d2gs would use (--device auto) and, with -s, a scene's format, cameras, sparse-view "
+              "split and point count");
   add_scene_flags(*sub, opts->scene, SplitFlags::All);
+  sub->get_option("--source")->required(false);
   sub->add_flag("--json", opts->json, "Machine-readable output");
   return [opts]() -> int {
+    if (opts->scene.source.empty()) {
+      if (opts->json) std::fputs((nlohmann::ordered_json{{"backend", backend_json()}}.dump(2) + "\n").c_str(), stdout);
+      else print_backend();
+      return 0;
+    }
     const auto [scene, split] = opts->scene.load();
     if (opts->json) {
-      const std::string text = to_json(scene, split).dump(2, ' ', false, nlohmann::ordered_json::error_handler_t::replace) + "\n";
+      nlohmann::ordered_json j = to_json(scene, split);
+      j["backend"] = backend_json();
+      const std::string text = j.dump(2, ' ', false, nlohmann::ordered_json::error_handler_t::replace) + "\n";
       std::fputs(text.c_str(), stdout);
     } else {
       print_table(scene, split);
+      std::fputs("\n", stdout);
+      print_backend();
     }
     return 0;
   };

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "cli/commands.hpp"
+#include "cli/device_flag.hpp"
 #include "cli/scene_flags.hpp"
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
@@ -34,11 +35,13 @@ struct RenderCommandOptions {
   int sh_degree = -1;
   bool depth = false;
   bool alpha = false;
+  std::string device;
 };
 
 int run_render(const RenderCommandOptions& o) {
   if (o.split != "test" && o.split != "train" && o.split != "all")
     fail("--split must be test, train or all (got '{}')", o.split);
+  resolve_device_flag(o.device);  // the CPU until the CUDA backend renders (render/device_choice.hpp)
   const std::filesystem::path out_dir = o.output;
   check_output_folder(out_dir);  // before any work: a path under a file fails now, not after rendering
   const Gaussians model = read_gaussians_ply(o.model);
@@ -102,6 +105,7 @@ Run add_render_command(CLI::App& app) {
   sub->add_flag("--depth", opts->depth,
                 "Also write <name>_depth.npy (float32, view-space z / alpha) and <name>_depth.png (16-bit, z*1000)");
   sub->add_flag("--alpha", opts->alpha, "Also write <name>_alpha.png (8-bit accumulated opacity)");
+  add_device_flag(*sub, opts->device);
   return [opts]() -> int { return run_render(*opts); };
 }
 

@@ -10,6 +10,7 @@
 
 #include <nlohmann/json_fwd.hpp>
 
+#include "d2gs/render/device_choice.hpp"
 #include "d2gs/train/adam.hpp"
 #include "d2gs/train/densify.hpp"
 #include "d2gs/train/dropout.hpp"
@@ -35,6 +36,9 @@ struct TrainConfig {
   std::string method = "3dgs";  // a name of train/methods/registry.cpp: 3dgs, dropgaussian, d2gs
   int iterations = 10000;
   std::uint64_t seed = 0;
+  // The backend (render/device_choice.hpp): "cpu", "cuda" or "auto" (CUDA when a device exists and the
+  // CUDA backend runs a whole step, else the CPU, saying why). Not part of a run's identity.
+  render::DeviceRequest device = render::DeviceRequest::Auto;
 
   // initial Gaussians: "dense" (stereo + fusion of the training views), "sparse" (SIFT triangulation of
   // the training views), a PLY path, "random", or "sfm-all-views" (oracle: saw the test views)
@@ -97,9 +101,9 @@ struct TrainConfig {
   void validate() const;
 };
 
-// The keys a run's config.json records beside the options (the split, the scene extent, ...): a
+// The keys a run's config.json records beside the options (the split, the scene extent, the device used, ...): a
 // --config file or an experiment may hold them, and they are not read back as options.
-inline constexpr const char* kRecordedKeys[] = {"init_is_oracle", "scene_extent", "split", "images_folder"};
+inline constexpr const char* kRecordedKeys[] = {"init_is_oracle", "scene_extent", "split", "images_folder", "device_used"};
 
 // How the run's scene is loaded (resolution, background, image source) and split into views.
 SceneLoadOptions scene_load_options(const TrainConfig& c);

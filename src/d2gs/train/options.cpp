@@ -339,6 +339,15 @@ std::vector<TrainOption> declare() {
                      [](auto& c) -> auto& { return c.iterations; }, positive()));
   t.push_back(number({"seed", method, "Seed of every random choice (same seed and input: same model)"},
                      [](auto& c) -> auto& { return c.seed; }, any_value()));
+  t.push_back(choice({"device", method,
+                      "Backend: 'cpu' (the reference), 'cuda' (an error where no CUDA device or no complete CUDA "
+                      "backend exists), 'auto' (CUDA when both exist, else the CPU, saying why; `d2gs info` shows the "
+                      "choice)",
+                      Output},
+                     [](auto& c) -> auto& { return c.device; },
+                     {{"cpu", render::DeviceRequest::Cpu},
+                      {"cuda", render::DeviceRequest::Cuda},
+                      {"auto", render::DeviceRequest::Auto}}));
   // ---- initial points ----
   t.push_back(text({"init", init,
                     "Initial points: 'dense' (stereo depth of the training views fused, as `d2gs init`; reuses "

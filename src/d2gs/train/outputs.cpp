@@ -6,13 +6,14 @@ namespace d2gs {
 namespace fs = std::filesystem;
 
 void write_run_config(const fs::path& model_dir, const TrainConfig& cfg, const Scene& scene, const Split& split,
-                      float scene_extent, bool init_is_oracle) {
+                      float scene_extent, bool init_is_oracle, render::Device device_used) {
   nlohmann::json j;
   to_json(j, cfg);
   j["init_is_oracle"] = init_is_oracle;
   j["scene_extent"] = scene_extent;
   j["split"] = {{"train", split.train}, {"test", split.test}};
   j["images_folder"] = scene.images_folder;
+  j["device_used"] = render::to_string(device_used);
   write_file_atomic(model_dir / "config.json", j.dump(2));
 }
 
@@ -43,6 +44,7 @@ nlohmann::json write_results_json(const fs::path& model_dir, const EvalSummary& 
   j["gaussians"] = run.gaussians;
   if (run.train_seconds) j["train_seconds"] = *run.train_seconds;
   j["init_is_oracle"] = run.init_is_oracle;
+  if (!run.device.empty()) j["device"] = run.device;
   j["image_source"] = to_string(scene.image_source);
   j["images_folder"] = scene.images_folder;
   write_file_atomic(model_dir / "results.json", j.dump(2));

@@ -16,9 +16,10 @@
 namespace d2gs {
 
 // MODEL/config.json: every option (train/options.cpp) and what the run made of them, the keys of
-// kRecordedKeys: the split, the scene extent, the images folder and whether the initial points are an oracle.
+// kRecordedKeys: the split, the scene extent, the images folder, whether the initial points are an oracle, and
+// the backend --device chose.
 void write_run_config(const std::filesystem::path& model_dir, const TrainConfig& cfg, const Scene& scene,
-                      const Split& split, float scene_extent, bool init_is_oracle);
+                      const Split& split, float scene_extent, bool init_is_oracle, render::Device device_used);
 
 // MODEL/cameras.json: the training then the test cameras in the 3DGS format (position, camera-to-world
 // rotation, fx, fy), each with its global image index.
@@ -31,6 +32,7 @@ struct RunResults {
   std::size_t gaussians = 0;
   bool init_is_oracle = false;
   std::optional<double> train_seconds;  // d2gs train's; d2gs eval leaves it out
+  std::string device;                   // the backend that rendered the test views ("cpu", "cuda"); empty: not recorded
 };
 // MODEL/results.json: `summary` (evaluate.hpp's to_json), `run`, and the scene's image source and folder
 // (what the views were scored against). Returns what it wrote.

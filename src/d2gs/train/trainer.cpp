@@ -78,6 +78,7 @@ struct Trainer::State {
   Gaussians model;
   AdamState adam;
   GradientStats stats;
+  render::DeviceChoice device;                // what --device chose (the CPU until the CUDA step exists)
   std::unique_ptr<render::Rasterizer> rasterizer;
   Ssim<float> ssim;
   std::vector<Ssim<float>::Reference> ssim_refs;  // by position in split.train: the images' local statistics
@@ -193,6 +194,11 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
   config.validate();
   s.cfg = std::move(config);
   s.method = make_training_method(s.cfg);
+  // --device: `cuda` that cannot be had is an error before anything is read or written; `auto` says why it
+  // took the CPU. Every stage below is the CPU backend's: choose_device returns the CPU until the CUDA
+  // backend runs a whole step (render/device_choice.hpp).
+  s.device = render::choose_device(s.cfg.device);
+  if (!s.device.reason.empty()) spdlog::info("--device auto: using the {}: {}", s.device.description, s.device.reason);
   const bool resuming = !resume_from.empty();
   std::error_code ec;
   if (fs::exists(s.cfg.model_dir, ec) && !fs::is_directory(s.cfg.model_dir, ec))
@@ -285,7 +291,7 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
   } else {
     write_point_cloud_ply(s.out() / "input.ply", init);
   }
-  write_run_config(s.out(), s.cfg, s.scene, s.split, s.extent, s.oracle_init);
+  write_run_config(s.out(), s.cfg, s.scene, s.split, s.extent, s.oracle_init, s.device.device);
   write_cameras_json(s.out(), s.scene, s.split);
   s.log.open(s.out() / "train_log.jsonl", s.iteration > 0 ? std::ios::app : std::ios::trunc);
   if (!s.log) fail_file(s.out() / "train_log.jsonl", "cannot open for writing");
@@ -480,7 +486,8 @@ void Trainer::run() {
     const auto e = evaluate_test_views(s.out() / "test" / fmt::format("ours_{}", s.iteration));
     write_results_json(s.out(), e, s.scene,
                        {.method = cfg.method, .iteration = s.iteration, .gaussians = s.model.size(),
-                        .init_is_oracle = s.oracle_init, .train_seconds = s.elapsed()});
+                        .init_is_oracle = s.oracle_init, .train_seconds = s.elapsed(),
+                        .device = render::to_string(s.device.device)});
     if (!cfg.quiet) std::fprintf(stdout, "%s", format_table(e).c_str());
   }
 }

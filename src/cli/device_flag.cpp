@@ -1,0 +1,22 @@
+#include "cli/device_flag.hpp"
+
+#include <spdlog/spdlog.h>
+
+namespace d2gs::cli {
+
+void add_device_flag(CLI::App& cmd, std::string& word) {
+  word = "auto";
+  cmd.add_option("--device", word,
+                 "Backend: cpu (the reference), cuda (an error where no CUDA device or no complete CUDA backend "
+                 "exists), auto (CUDA when both exist, else the CPU, saying why; `d2gs info` shows the choice)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"cpu", "cuda", "auto"}));
+}
+
+render::DeviceChoice resolve_device_flag(const std::string& word) {
+  const render::DeviceChoice choice = render::choose_device(render::parse_device_request(word));
+  if (!choice.reason.empty()) spdlog::info("--device auto: using the {}: {}", choice.description, choice.reason);
+  return choice;
+}
+
+}  // namespace d2gs::cli

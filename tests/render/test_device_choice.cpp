@@ -1,0 +1,128 @@
+// --device cpu|cuda|auto (render/device_choice.hpp) and `d2gs info`'s backend: `cuda` that cannot be had
+// is a one-line error before any work, `auto` takes the CPU and says why, and runs record what they used.
+#include <gtest/gtest.h>
+
+#include <string>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "d2gs/core/atomic_file.hpp"
+#include "d2gs/core/error.hpp"
+#include "d2gs/render/cuda/device.hpp"
+#include "d2gs/render/device_choice.hpp"
+#include "test_paths.hpp"
+
+namespace d2gs {
+namespace {
+namespace fs = std::filesystem;
+
+std::string fern() { return (test::shared_data() / "nerf_llff_data/fern").string(); }
+
+// True where CUDA would be chosen: a device and a CUDA backend that runs a whole step. Until then every
+// machine, with or without a GPU, takes the paths these tests check.
+bool cuda_usable() { return render::cuda_backend_complete() && cuda::device_count() > 0; }
+
+TEST(DeviceChoice, CpuIsAlwaysTheCpu) {
+  const render::DeviceChoice c = render::choose_device(render::DeviceRequest::Cpu);
+  EXPECT_EQ(c.device, render::Device::Cpu);
+  EXPECT_TRUE(c.reason.empty());
+  EXPECT_NE(c.description.find("CPU ("), std::string::npos) << c.description;
+  EXPECT_NE(c.description.find("OpenMP thread"), std::string::npos) << c.description;
+}
+
+TEST(DeviceChoice, AutoFallsBackToTheCpuAndSaysWhy) {
+  if (cuda_usable()) GTEST_SKIP() << "CUDA is usable here: auto chooses it";
+  const render::DeviceChoice c = render::choose_device(render::DeviceRequest::Auto);
+  EXPECT_EQ(c.device, render::Device::Cpu);
+  ASSERT_FALSE(c.reason.empty());
+  // Without a device the reason is the discovery's; with one, that the backend is incomplete.
+  if (cuda::device_count() == 0) EXPECT_EQ(c.reason, cuda::describe_device());
+  else EXPECT_NE(c.reason.find("does not yet run a whole training step"), std::string::npos) << c.reason;
+}
+
+TEST(DeviceChoice, CudaThatCannotBeHadIsAOneLineError) {
+  if (cuda_usable()) GTEST_SKIP() << "CUDA is usable here";
+  std::string message;
+  try {
+    render::choose_device(render::DeviceRequest::Cuda);
+  } catch (const Error& e) {
+    message = e.what();
+  }
+  ASSERT_FALSE(message.empty()) << "--device cuda was accepted without a usable CUDA backend";
+  EXPECT_EQ(message.rfind("--device cuda: ", 0), 0u) << message;
+  EXPECT_EQ(message.find('\n'), std::string::npos) << message;
+  EXPECT_NE(message.find("use --device cpu or auto"), std::string::npos) << message;
+}
+
+TEST(DeviceChoice, RequestsParseAndPrint) {
+  for (const char* w : {"cpu", "cuda", "auto"}) EXPECT_STREQ(render::to_string(render::parse_device_request(w)), w);
+  try {
+    render::parse_device_request("gpu");
+    ADD_FAILURE() << "'gpu' was taken";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("--device must be cpu, cuda or auto (got 'gpu')"), std::string::npos) << e.what();
+  }
+}
+
+// d2gs train/render/eval: cuda fails before anything is read or written; auto trains on the CPU, logs why,
+// and config.json / results.json record the request and the backend used.
+TEST(DeviceCli, TrainRenderEvalTakeTheFlag) {
+  if (cuda_usable()) GTEST_SKIP() << "CUDA is usable here";
+  const auto dir = test::scratch_dir();
+  const auto refused = test::run_cli(fmt::format("train -s '{}' -m '{}' -r 8 --n-views 3 --init random --iterations 2 --device cuda",
+                                                 fern(), (dir / "refused").string()));
+  EXPECT_EQ(refused.exit_code, 1) << refused.output;
+  EXPECT_NE(refused.output.find("d2gs: error: --device cuda: "), std::string::npos) << refused.output;
+  EXPECT_EQ(test::count_occurrences(refused.output, "\n"), 1u) << refused.output;
+  EXPECT_FALSE(fs::exists(dir / "refused")) << "work was done before the device was checked";
+  const auto bad = test::run_cli(fmt::format("train -s '{}' -m '{}' --device gpu", fern(), (dir / "bad").string()));
+  EXPECT_NE(bad.exit_code, 0);
+  EXPECT_NE(bad.output.find("--device"), std::string::npos) << bad.output;
+
+  const auto r = test::run_cli(fmt::format("train -s '{}' -m '{}' -r 8 --n-views 3 --init random --random-points 300 "
+                                           "--iterations 2 --quiet",
+                                           fern(), (dir / "run").string()));
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("--device auto: using the CPU ("), std::string::npos) << r.output;
+  const auto config = nlohmann::json::parse(read_file(dir / "run/config.json"));
+  EXPECT_EQ(config["device"], "auto");
+  EXPECT_EQ(config["device_used"], "cpu");
+  EXPECT_EQ(nlohmann::json::parse(read_file(dir / "run/results.json"))["device"], "cpu");
+  // A saved config.json is a valid --config (device_used is recorded, not an option).
+  const auto again = test::run_cli(fmt::format("-q train --config '{}' -m '{}' --device cpu",
+                                               (dir / "run/config.json").string(), (dir / "again").string()));
+  EXPECT_EQ(again.exit_code, 0) << again.output;
+
+  const auto eval_cuda = test::run_cli(fmt::format("-q eval -m '{}' --device cuda", (dir / "run").string()));
+  EXPECT_EQ(eval_cuda.exit_code, 1) << eval_cuda.output;
+  EXPECT_NE(eval_cuda.output.find("--device cuda: "), std::string::npos) << eval_cuda.output;
+  const auto eval_cpu = test::run_cli(fmt::format("-q eval -m '{}' --device cpu --json", (dir / "run").string()));
+  ASSERT_EQ(eval_cpu.exit_code, 0) << eval_cpu.output;
+  EXPECT_EQ(nlohmann::json::parse(eval_cpu.output)["device"], "cpu");
+
+  const auto render_cuda = test::run_cli(fmt::format("-q render -m '{}' -s '{}' -r 8 --n-views 3 -o '{}' --device cuda",
+                                                     (dir / "run/point_cloud/iteration_2/point_cloud.ply").string(), fern(),
+                                                     (dir / "renders").string()));
+  EXPECT_EQ(render_cuda.exit_code, 1) << render_cuda.output;
+  EXPECT_NE(render_cuda.output.find("--device cuda: "), std::string::npos) << render_cuda.output;
+  EXPECT_FALSE(fs::exists(dir / "renders"));
+}
+
+// d2gs info without a scene: the backend --device auto would use, as a table and as JSON.
+TEST(DeviceCli, InfoSaysWhichDeviceWouldBeUsed) {
+  const auto table = test::run_cli("info");
+  ASSERT_EQ(table.exit_code, 0) << table.output;
+  EXPECT_NE(table.output.find("(what --device auto uses)"), std::string::npos) << table.output;
+  EXPECT_NE(table.output.find("CUDA "), std::string::npos) << table.output;
+  const auto j = test::run_cli("info --json");
+  ASSERT_EQ(j.exit_code, 0) << j.output;
+  const auto backend = nlohmann::json::parse(j.output)["backend"];
+  EXPECT_EQ(backend["device"], cuda_usable() ? "cuda" : "cpu");
+  EXPECT_EQ(backend["cuda_devices"], cuda::device_count());
+  EXPECT_FALSE(backend["cpu_tile_levels"].empty());
+  EXPECT_EQ(backend.contains("reason"), !cuda_usable());
+}
+
+}  // namespace
+}  // namespace d2gs
