@@ -177,6 +177,17 @@ TEST(Checkpoint, ResumeRules) {
   other = r;
   other.options.erase("init");
   EXPECT_EQ(refused(other), "c.bin: cannot resume: it was trained with init = \"dense\", this run has (no such option)");
+  // An option newer than the checkpoint (its identity lacks it): accepted at its default, which is what the
+  // code did before the option existed, and refused at any other value.
+  Checkpoint older{r, state()};
+  ASSERT_FALSE(older.run.options.contains("stereo_depth_lambda"));
+  other = r;
+  other.options["stereo_depth_lambda"] = 0.05;  // the default
+  EXPECT_EQ(check_resume("c.bin", older, other, 100), "");
+  other = r;
+  other.options["stereo_depth_lambda"] = 0.5;
+  EXPECT_EQ(test::error_of([&] { (void)check_resume("c.bin", older, other, 100); }),
+            "c.bin: cannot resume: it was trained with stereo_depth_lambda = (no such option), this run has 0.5");
 
   // --iterations.
   EXPECT_EQ(refused(r, 39), "c.bin: cannot resume: it is at iteration 40, beyond --iterations 39; resume with "

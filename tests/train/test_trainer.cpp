@@ -12,7 +12,10 @@
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/npy.hpp"
+#include "d2gs/core/image.hpp"
 #include "d2gs/model/ply.hpp"
+#include "d2gs/render/rasterizer.hpp"
+#include "d2gs/train/losses.hpp"
 #include "d2gs/train/initialize.hpp"
 #include "d2gs/train/trainer.hpp"
 #include "test_paths.hpp"
@@ -140,6 +143,60 @@ TEST(Trainer, RegularisersTrainAndResumeBitIdentically) {
   };
   // 0.95^14 ≈ 0.49 of decay over iterations 6–19, against what the gradients add back in 20 iterations.
   EXPECT_LT(mean_opacity(a.model()), 0.85 * mean_opacity(c.model()));
+}
+
+// --regularisers stereo-depth: the term is logged, resumes bit-identically (it keeps no state), and pulls the
+// training views' rendered disparity towards the stereo depth maps of the run's geometry.
+TEST(Trainer, StereoDepthPullsTheRenderTowardsTheStereoDepth) {
+  const auto dir = test::scratch_dir();
+  auto cfg = fern_config(dir / "a", "dropgaussian", 40);
+  cfg.init = "sparse";  // a cloud whose depth the stereo maps can still improve
+  cfg.regularisers = {"stereo-depth"};
+  cfg.stereo_depth_lambda = 0.5;
+  cfg.checkpoint_iterations = {20};
+  Trainer a(cfg);
+  a.run();
+  auto cfg_b = cfg;
+  cfg_b.model_dir = (dir / "b").string();
+  cfg_b.checkpoint_iterations = {};
+  Trainer b(cfg_b, dir / "a/chkpnt20.bin");
+  b.run();
+  EXPECT_EQ(b.model().means, a.model().means);
+  EXPECT_EQ(b.model().opacity_logits, a.model().opacity_logits);
+  std::ifstream log(dir / "a/train_log.jsonl");
+  std::string line;
+  int logged = 0;
+  while (std::getline(log, line)) {
+    const auto j = nlohmann::json::parse(line);
+    if (j.contains("stereo_depth")) {
+      EXPECT_GT(j["stereo_depth"].get<double>(), 0.0) << line;
+      ++logged;
+    }
+  }
+  EXPECT_GE(logged, 3);
+
+  auto cfg_c = cfg_b;
+  cfg_c.model_dir = (dir / "c").string();
+  cfg_c.regularisers = {};
+  Trainer c(cfg_c);
+  c.run();
+  // The loss itself, on every training view of both models, against the maps the run used.
+  auto rasterizer = render::make_cpu_rasterizer();
+  const auto disparity_error = [&](const Trainer& t) {
+    double sum = 0.0;
+    for (int v : t.split().train) {
+      const Camera& cam = t.scene().cameras[static_cast<std::size_t>(v)];
+      const NpyArray map = read_npy(dir / "a/init/depth" / (fs::path(cam.image_name).stem().string() + ".npy"));
+      Image depth(static_cast<int>(map.shape[1]), static_cast<int>(map.shape[0]), 1);
+      for (std::size_t i = 0; i < map.values.size(); ++i) depth.pixels[i] = static_cast<float>(map.values[i]);
+      depth = resize_area_nonzero(depth, cam.width, cam.height);
+      const auto& out = rasterizer->forward(t.model(), nullptr, render::make_render_camera(cam), render::RenderOptions{});
+      sum += disparity_l1_loss(out.depth.data(), out.alpha.data(), depth.pixels.data(), depth.pixels.size(), 0.5);
+    }
+    return sum;
+  };
+  const double with = disparity_error(a), without = disparity_error(c);
+  EXPECT_LT(with, 0.9 * without) << "with stereo-depth " << with << ", without " << without;
 }
 
 TEST(Trainer, D2gsDropsNearDenseGaussiansAndRuns) {

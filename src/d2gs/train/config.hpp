@@ -86,6 +86,10 @@ struct TrainConfig {
   // opacity-decay (Binocular3DGS, NeurIPS 2024): sigmoid(logit) × factor after every iteration past
   // --densify-from.
   double opacity_decay_factor = 0.995;
+  // stereo-depth: the weight of the disparity L1 towards the training views' stereo depth (losses.hpp).
+  // 0.05 puts a typical relative disparity error of 0.1–0.3 at a few tenths of the L1 colour loss; chosen
+  // a priori, not tuned on a scene.
+  double stereo_depth_lambda = 0.05;
 
   // outputs
   std::vector<int> save_iterations;        // empty = the last iteration only

@@ -79,4 +79,29 @@ double dafe_loss(const float* a, const float* b, int width, int height, int chan
   return sum / denom;
 }
 
+double disparity_l1_loss(const float* depth_sum, const float* alpha, const float* target_depth, std::size_t count,
+                         double alpha_min, float* grad_depth, float* grad_alpha, float scale) {
+  // The normaliser: the pixels with a target and their mean target disparity.
+  std::size_t targets = 0;
+  double disparity_sum = 0.0;
+  for (std::size_t i = 0; i < count; ++i)
+    if (target_depth[i] > 0.0f) {
+      ++targets;
+      disparity_sum += 1.0 / static_cast<double>(target_depth[i]);
+    }
+  if (targets == 0 || !(disparity_sum > 0.0)) return 0.0;
+  const double norm = 1.0 / disparity_sum;  // = 1 / (targets · mean disparity)
+  double loss = 0.0;
+  for (std::size_t i = 0; i < count; ++i) {
+    const double z = target_depth[i], d = depth_sum[i], a = alpha[i];
+    if (!(z > 0.0) || !(d > 0.0) || !(a >= alpha_min)) continue;
+    const double diff = a / d - 1.0 / z;
+    loss += std::abs(diff);
+    const double sign = diff > 0.0 ? 1.0 : diff < 0.0 ? -1.0 : 0.0;
+    if (grad_depth) grad_depth[i] += static_cast<float>(scale * norm * sign * (-a / (d * d)));
+    if (grad_alpha) grad_alpha[i] += static_cast<float>(scale * norm * sign / d);
+  }
+  return loss * norm;
+}
+
 }  // namespace d2gs

@@ -40,4 +40,14 @@ std::vector<std::uint8_t> dafe_mask(const std::vector<float>& prior, PriorKind k
 double dafe_loss(const float* a, const float* b, int width, int height, int channels,
                  const std::vector<std::uint8_t>& mask, DafeLossForm form, float* grad = nullptr, float scale = 1.0f);
 
+// The stereo-depth regulariser's loss (train/methods/stereo_depth.cpp): the L1 distance between the
+// render's disparity u = alpha / D (D = Σ w·z, the rasterizer's depth output, not divided by alpha) and the
+// target disparity v = 1 / z, summed over the pixels that have a target (z > 0), a render depth D > 0 and
+// alpha ≥ alpha_min, then divided by the number of pixels with a target and by their mean target
+// disparity: a relative error, independent of the scene's scale and of how much of the view the model
+// covers yet. 0 for a map without targets. grad_depth and grad_alpha (if non-null) += scale · dL/dD and
+// scale · dL/dalpha (|x|' at 0 is 0); pixels below alpha_min get no gradient.
+double disparity_l1_loss(const float* depth_sum, const float* alpha, const float* target_depth, std::size_t count,
+                         double alpha_min, float* grad_depth = nullptr, float* grad_alpha = nullptr, float scale = 1.0f);
+
 }  // namespace d2gs

@@ -512,6 +512,10 @@ std::vector<TrainOption> declare() {
   t.push_back(number({"opacity_decay_factor", regularisers,
                       "opacity-decay: each Gaussian's opacity times this after every iteration past --densify-from"},
                      [](auto& c) -> auto& { return c.opacity_decay_factor; }, {.min = 0.0, .max = 1.0, .min_open = true}));
+  t.push_back(number({"stereo_depth_lambda", regularisers,
+                      "stereo-depth: weight of the relative disparity L1 between the render and the training views' "
+                      "stereo depth"},
+                     [](auto& c) -> auto& { return c.stereo_depth_lambda; }, at_least(0)));
   // ---- outputs ----
   t.push_back(integer_list({"save_iterations", outputs, "Iterations whose model is saved (default: the last)", Output},
                            [](auto& c) -> auto& { return c.save_iterations; }, closed(1, 2147483647)));

@@ -90,7 +90,7 @@ struct Trainer::State {
   double elapsed_before = 0.0;                // seconds spent before a resume
 
   // per-iteration buffers (reused)
-  std::vector<float> pred, grad_rgb;
+  std::vector<float> pred, grad_rgb, grad_depth, grad_alpha;  // grad_depth, grad_alpha: only for a method that uses_depth()
   Clock::time_point started = Clock::now();
   std::ofstream log;
   // Set by run(): step() then saves the model and scores the test views at the configured iterations, after the
@@ -352,13 +352,24 @@ IterationRecord Trainer::step() {
          view, gt_stats.width, gt_stats.height, gt_stats.channels);
   rec.ssim = s.ssim.evaluate(s.pred.data(), gt_stats, s.grad_rgb.data(), -cfg.lambda_dssim);
   rec.loss = rec.l1 + cfg.lambda_dssim * (1.0 - rec.ssim);
-  rec.terms = s.method->loss_terms(MethodLoss{method_step, s.pred.data(), gt, out.width, out.height, 3, s.grad_rgb.data()});
+  // Depth and alpha reach the loss terms, and their gradients the backward, only for a method that uses them.
+  const bool depth_terms = s.method->uses_depth();
+  if (depth_terms) {
+    s.grad_depth.assign(out.depth.size(), 0.0f);
+    s.grad_alpha.assign(out.alpha.size(), 0.0f);
+  }
+  rec.terms = s.method->loss_terms(MethodLoss{method_step, s.pred.data(), gt, out.width, out.height, 3, s.grad_rgb.data(),
+                                              depth_terms ? out.depth.data() : nullptr,
+                                              depth_terms ? out.alpha.data() : nullptr,
+                                              depth_terms ? s.grad_depth.data() : nullptr,
+                                              depth_terms ? s.grad_alpha.data() : nullptr});
   for (const LossTerm& term : rec.terms) rec.loss += term.weight * term.value;
   for (std::size_t i = 0; i < values; ++i)
     if (out.rgb[i] < 0.0f || out.rgb[i] > 1.0f) s.grad_rgb[i] = 0.0f;  // clamp: no gradient outside [0, 1]
   if (!std::isfinite(rec.loss)) fail("iteration {}: the loss is not finite ({}); stopping", t, rec.loss);
 
-  const auto& grads = s.rasterizer->backward(s.grad_rgb.data(), nullptr, nullptr);
+  const auto& grads = s.rasterizer->backward(s.grad_rgb.data(), depth_terms ? s.grad_alpha.data() : nullptr,
+                                             depth_terms ? s.grad_depth.data() : nullptr);
   {
     const auto check = [&](const std::vector<float>& a, const char* name) {
       if (!all_finite(a)) fail("iteration {}: non-finite gradient in {}; stopping", t, name);

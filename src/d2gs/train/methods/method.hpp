@@ -6,7 +6,7 @@
 //
 // One iteration, as the trainer runs it (docs/training.md):
 //   camera → prepare() → opacity_multiplier() → render → L1 + λ·(1 − SSIM) + loss_terms() on the
-//   clamped image → backward → before_update() → densification, then after_densify() → Adam step.
+//   clamped image (and the depth and alpha, for a method that uses_depth()) → backward → before_update() → densification, then after_densify() → Adam step.
 //
 // A new method or regulariser is one file here (a TrainingMethod and its make_ function) and its entry
 // in registry.cpp (docs/training.md, "Adding a method"); options of its own go into TrainConfig.
@@ -67,13 +67,18 @@ struct OpacityMultiplier {
   double drop_fraction = 0.0;
 };
 
-// The loss on the clamped prediction, for extra terms (interleaved H×W×C images).
+// The loss on the clamped prediction, for extra terms (interleaved H×W×C images), and on the render's
+// depth and alpha for a method whose uses_depth() is true (null otherwise).
 struct MethodLoss {
   const MethodStep& step;
   const float* prediction;  // clamped to [0, 1]
   const Image& target;
   int width = 0, height = 0, channels = 3;
   float* grad;  // d loss / d prediction: each term adds weight · its gradient
+  const float* depth = nullptr;  // H×W: Σ w·z, not divided by alpha (render::RenderOutputs::depth)
+  const float* alpha = nullptr;  // H×W
+  float* grad_depth = nullptr;   // d loss / d depth, d loss / d alpha: each term adds weight · its gradient
+  float* grad_alpha = nullptr;
 };
 
 // A term of the loss: loss += weight · value; logged under `name` (train_log.jsonl).
@@ -111,8 +116,12 @@ public:
   virtual void prepare(const MethodStep& /*step*/) {}
   // The opacity multiplier of this iteration's render.
   virtual OpacityMultiplier opacity_multiplier(const MethodStep& /*step*/) { return {}; }
-  // Extra loss terms: each adds weight · its gradient to loss.grad and is returned.
+  // Extra loss terms: each adds weight · its gradient to loss.grad (and, with uses_depth(), to
+  // loss.grad_depth / grad_alpha) and is returned.
   virtual std::vector<LossTerm> loss_terms(const MethodLoss& /*loss*/) { return {}; }
+  // Whether loss_terms() needs the render's depth and alpha and their gradients. Without it the backward
+  // gets no depth or alpha gradient at all, exactly as before the hook existed.
+  virtual bool uses_depth() const { return false; }
   // After the backward, before densification and the Adam step, on every iteration but the last (whose
   // model is the one saved): edits of the parameters themselves (opacity decay). The Adam moments stay.
   virtual void before_update(int /*iteration*/, Gaussians& /*model*/) {}

@@ -16,6 +16,7 @@ std::unique_ptr<TrainingMethod> make_dropgaussian(const TrainConfig& config);
 std::unique_ptr<TrainingMethod> make_d2gs(const TrainConfig& config);
 std::unique_ptr<TrainingMethod> make_opacity_noise(const TrainConfig& config);
 std::unique_ptr<TrainingMethod> make_opacity_decay(const TrainConfig& config);
+std::unique_ptr<TrainingMethod> make_stereo_depth(const TrainConfig& config);
 std::unique_ptr<TrainingMethod> stack_methods(std::unique_ptr<TrainingMethod> method,
                                               std::vector<std::pair<std::string, std::unique_ptr<TrainingMethod>>> parts);
 
@@ -34,6 +35,9 @@ const std::vector<MethodInfo>& training_regularisers() {
        &make_opacity_noise},
       {"opacity-decay", "each opacity times a factor after every iteration past --densify-from (Binocular3DGS)",
        &make_opacity_decay},
+      {"stereo-depth", "the render's disparity pulled towards the training views' multi-view stereo depth, weighted by "
+                       "--stereo-depth-lambda",
+       &make_stereo_depth},
   };
   return regularisers;
 }

@@ -75,6 +75,13 @@ public:
     return terms;
   }
 
+  bool uses_depth() const override {
+    if (method_->uses_depth()) return true;
+    for (const auto& p : parts_)
+      if (p.second->uses_depth()) return true;
+    return false;
+  }
+
   void before_update(int iteration, Gaussians& model) override {
     method_->before_update(iteration, model);
     for (auto& [n, p] : parts_) p->before_update(iteration, model);
