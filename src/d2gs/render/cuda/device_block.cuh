@@ -96,6 +96,24 @@ struct DeviceBlock {
 #endif
   }
   template <class T>
+  D2GS_HD void warp_any(Reg<int>& dst, const Reg<T>& src) const {
+#if defined(__CUDA_ARCH__)
+    dst.value = __any_sync(0xffffffffu, src.value != T{}) ? 1 : 0;
+#else
+    (void)dst, (void)src;
+#endif
+  }
+  // `active` is warp-uniform (a warp_any result), so the whole warp takes the shuffle or skips it.
+  template <class T>
+  D2GS_HD void shfl_down_if(const Reg<int>& active, Reg<T>& dst, const Reg<T>& src, int delta) const {
+#if defined(__CUDA_ARCH__)
+    if (active.value)
+      dst.value = shuffle_words(src.value, [delta](auto w) { return __shfl_down_sync(0xffffffffu, w, static_cast<unsigned>(delta)); });
+#else
+    (void)active, (void)dst, (void)src, (void)delta;
+#endif
+  }
+  template <class T>
   D2GS_HD void shfl_xor(Reg<T>& dst, const Reg<T>& src, int mask) const {
 #if defined(__CUDA_ARCH__)
     dst.value = shuffle_words(src.value, [mask](auto w) { return __shfl_xor_sync(0xffffffffu, w, mask); });

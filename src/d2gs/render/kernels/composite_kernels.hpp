@@ -13,8 +13,8 @@
 // Backward: the tile's largest last contributor (a warp max by shuffles, the warps' through shared
 // memory) bounds the list; batches are loaded back to front and each pixel replays the forward from its
 // final T. For every Gaussian of the batch, the pixels' terms (SplatGrad: ten sums) are reduced over each
-// warp by shfl_down, and lane 0 adds the warp's total to the Gaussian's gradients with one atomic per
-// non-zero value. Sums over pixels and tiles thus run in another order than the CPU's (its lane sums and
+// warp where some pixel composited it (a warp vote) by shfl_down, and lane 0 adds the warp's total to the
+// Gaussian's gradients with one atomic per non-zero value. Sums over pixels and tiles thus run in another order than the CPU's (its lane sums and
 // its per-Gaussian sum over intersections in tile order), and on the GPU in no fixed order at all.
 #include "d2gs/render/composite_math.hpp"
 #include "d2gs/render/kernels/block.hpp"
@@ -185,6 +185,8 @@ struct CompositeBwdKernel {
 
     auto g = b.template reg<SplatGrad>();
     auto g_other = b.template reg<SplatGrad>();
+    auto valid = b.template reg<int>();
+    auto active = b.template reg<int>();
     for (int hi = tile_max; hi > 0; hi -= kCompositeBlock) {
       const int lo = hi > kCompositeBlock ? hi - kCompositeBlock : 0;
       b.sync();  // the previous batch is no longer read
@@ -201,15 +203,19 @@ struct CompositeBwdKernel {
         b.threads([&](const Thread& t) {
           const TilePixel p = tile_pixel(t, a.tiles_x, a.width, a.height);
           splat_grad_zero(g[t]);
-          pixel_backward_step<Smooth, Fused>(px[t], sh.batch[k], float(p.x), float(p.y), jl, a.clamp_pass_through,
-                                             g[t]);
+          valid[t] = pixel_backward_step<Smooth, Fused>(px[t], sh.batch[k], float(p.x), float(p.y), jl,
+                                                        a.clamp_pass_through, g[t]);
         });
-        for (int d = kWarpSize / 2; d > 0; d /= 2) {  // warp sum: lane 0 ends with the total
-          b.shfl_down(g_other, g, d);
-          b.threads([&](const Thread& t) { splat_grad_add(g[t], g_other[t]); });
+        // Warp sum (lane 0 ends with the total), in the warps where some pixel composited the Gaussian.
+        b.warp_any(active, valid);
+        for (int d = kWarpSize / 2; d > 0; d /= 2) {
+          b.shfl_down_if(active, g_other, g, d);
+          b.threads([&](const Thread& t) {
+            if (active[t]) splat_grad_add(g[t], g_other[t]);
+          });
         }
         b.threads([&](const Thread& t) {
-          if (t.lane() != 0) return;
+          if (t.lane() != 0 || !active[t]) return;
           float v[10];
           splat_grad_finish(g[t], sh.batch[k], v);
           const int id = sh.ids[k];

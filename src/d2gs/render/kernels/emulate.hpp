@@ -134,6 +134,30 @@ public:
     shuffle(dst, src, [mask](int lane) { return (lane ^ mask) % kWarpSize; });
   }
 
+  // __any_sync(full mask, src[t] != 0): dst[t] = 1 where some lane of t's warp holds a non-zero value.
+  template <class T>
+  void warp_any(Reg<int>& dst, const Reg<T>& src) {
+    const int n = threads_per_block();
+    for (int base = 0; base < n; base += kWarpSize) {
+      int any = 0;
+      for (int l = 0; l < kWarpSize; ++l) any |= src.at(base + l) != T{} ? 1 : 0;
+      for (int l = 0; l < kWarpSize; ++l) dst.at(base + l) = any;
+    }
+  }
+  // `if (active) dst = __shfl_down_sync(full mask, src, delta)` with `active` the same in every lane of a
+  // warp (a warp vote's result): the warps where it is 0 skip the shuffle, dst untouched. A warp whose
+  // lanes disagree would shuffle with lanes that are not there (undefined on the GPU): an error here.
+  template <class T>
+  void shfl_down_if(const Reg<int>& active, Reg<T>& dst, const Reg<T>& src, int delta) {
+    const int n = threads_per_block();
+    for (int base = 0; base < n; base += kWarpSize)
+      for (int l = 1; l < kWarpSize; ++l)
+        if ((active.at(base + l) != 0) != (active.at(base) != 0))
+          fail("kernel emulation: a shuffle taken by part of warp {} of block ({}, {}) only", base / kWarpSize,
+               index_.x, index_.y);
+    shuffle(dst, src, [delta](int lane) { return lane + delta < kWarpSize ? lane + delta : lane; }, &active);
+  }
+
   // __syncthreads_count(pred[t] != 0).
   template <class T>
   int sync_count(const Reg<T>& pred) {
@@ -162,13 +186,15 @@ private:
     t.dim_y = block_.y;
     return t;
   }
-  // All lanes read before any writes (src is copied first, so dst may be src).
+  // All lanes read before any writes (src is copied first, so dst may be src); with `active`, only the
+  // lanes where it is set.
   template <class T, class Source>
-  void shuffle(Reg<T>& dst, const Reg<T>& src, Source source_lane) {
+  void shuffle(Reg<T>& dst, const Reg<T>& src, Source source_lane, const Reg<int>* active = nullptr) {
     const int n = threads_per_block();
     std::vector<T> snapshot(static_cast<std::size_t>(n));
     for (int i = 0; i < n; ++i) snapshot[static_cast<std::size_t>(i)] = src.at(i);
     for (int i = 0; i < n; ++i) {
+      if (active && active->at(i) == 0) continue;
       const int warp_base = i - i % kWarpSize;
       dst.at(i) = snapshot[static_cast<std::size_t>(warp_base + source_lane(i % kWarpSize))];
     }
