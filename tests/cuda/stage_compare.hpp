@@ -99,5 +99,9 @@ struct FernCase {
   std::vector<render::CameraParams<float>> cameras;
 };
 FernCase load_fern_case();
+// The same cameras with the published 3-view fused cloud (published_init/fern/3_views_fused.ply) made
+// into Gaussians as the trainer's init does (gaussians_from_point_cloud), its scales jittered, random
+// opacities (a tenth past the 0.99 clamp), the same multiplier.
+FernCase load_fern_published_case();
 
 }  // namespace d2gs::test

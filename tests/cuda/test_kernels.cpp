@@ -60,6 +60,46 @@ TEST(KernelEmulator, ShufflesFollowTheirCudaDefinitions) {
   }
 }
 
+// Warp 0 has one lane voting, warp 1 none: warp 0 takes the conditional shuffle, warp 1 keeps its value.
+// With `split`, the shuffle's condition differs within a warp: refused.
+struct VoteArgs {
+  bool split = false;
+  int* any = nullptr;
+  int* down = nullptr;
+};
+struct VoteKernel {
+  struct Shared {};
+  template <class Block>
+  static void run(Block& b, Shared&, const VoteArgs& a) {
+    auto vote = b.template reg<int>();
+    auto active = b.template reg<int>();
+    auto v = b.template reg<int>();
+    auto r = b.template reg<int>();
+    b.threads([&](const Thread& t) {
+      vote[t] = t.linear() == 7 ? 5 : 0;
+      v[t] = t.linear();
+      r[t] = -1;
+    });
+    b.warp_any(active, vote);
+    if (a.split) b.threads([&](const Thread& t) { active[t] = t.lane() < 16; });
+    b.shfl_down_if(active, r, v, 4);
+    b.threads([&](const Thread& t) {
+      a.any[t.linear()] = active[t];
+      a.down[t.linear()] = r[t];
+    });
+  }
+};
+
+TEST(KernelEmulator, WarpVoteAndAShuffleTakenByWholeWarpsOnly) {
+  std::vector<int> any(64), down(64);
+  emulate::launch<VoteKernel>(Dim{1, 1}, Dim{64, 1}, VoteArgs{false, any.data(), down.data()});
+  for (int i = 0; i < 64; ++i) {
+    EXPECT_EQ(any[i], i < 32 ? 1 : 0) << i;
+    EXPECT_EQ(down[i], i >= 32 ? -1 : (i % 32) + 4 < 32 ? i + 4 : i) << i;
+  }
+  EXPECT_THROW(emulate::launch<VoteKernel>(Dim{1, 1}, Dim{64, 1}, VoteArgs{true, any.data(), down.data()}), Error);
+}
+
 struct PoisonArgs {
   float* shared_value = nullptr;
   int* register_value = nullptr;

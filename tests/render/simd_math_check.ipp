@@ -95,6 +95,27 @@ std::string check_sum_lanes4() {
 
 }  // namespace
 
+// exp_row of n values (n a multiple of the lanes), for the comparison with composite_math.hpp's
+// composite_exp in test_simd_math.cpp (compiled at the baseline level: composite_exp is an inline function
+// of no ISA namespace, so it is only instantiated there).
+void exp_row_values(const float* in, float* out, int n) {
+  using V = Row<float>::V;
+  constexpr int L = Row<float>::kLanes;
+  for (int i = 0; i + L <= n; i += L) {
+    V v;
+    for (int k = 0; k < L; ++k) v[k] = in[i + k];
+    const V e = exp_row(v);
+    for (int k = 0; k < L; ++k) out[i + k] = e[k];
+  }
+}
+bool exp_row_fuses() {
+#if defined(__FMA__) || defined(__AVX512F__)
+  return true;
+#else
+  return false;
+#endif
+}
+
 // The first mismatch found, or "" when every check passes.
 std::string simd_math_mismatch() {
   for (const std::string& r : {check_min_max_select<float>(), check_min_max_select<double>(), check_sum_lanes4()})

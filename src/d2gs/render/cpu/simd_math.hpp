@@ -12,6 +12,8 @@
 #include <immintrin.h>
 #endif
 
+#include "d2gs/render/composite_math.hpp"
+
 #ifndef D2GS_TILE_ISA
 #error "simd_math.hpp belongs to the tile kernels: define D2GS_TILE_ISA (see composite_tiles.ipp)"
 #endif
@@ -141,11 +143,13 @@ D2GS_TILE_INLINE V select_or_zero(M m, V a) {
 struct alignas(64) ExpConstants {
   Row<float>::V lo, hi, log2e, round, ln2_hi, ln2_lo, c0, c1, c2, c3, c4, c5, one;
 };
+// The values are composite_math.hpp's, whose composite_exp is this function for one lane (the CUDA
+// compositing kernels call it).
 static constexpr ExpConstants kExpConstants = {
-    Row<float>::V{} - 80.0f, Row<float>::V{} + 88.0f, Row<float>::V{} + 1.44269504088896341f,
-    Row<float>::V{} + 12582912.0f, Row<float>::V{} - 0.693359375f, Row<float>::V{} + 2.12194440e-4f,
-    Row<float>::V{} + 1.9875691500e-4f, Row<float>::V{} + 1.3981999507e-3f, Row<float>::V{} + 8.3334519073e-3f,
-    Row<float>::V{} + 4.1665795894e-2f, Row<float>::V{} + 1.6666665459e-1f, Row<float>::V{} + 5.0000001201e-1f,
+    Row<float>::V{} + kExpLo, Row<float>::V{} + kExpHi, Row<float>::V{} + kExpLog2e,
+    Row<float>::V{} + kExpRound, Row<float>::V{} + kExpLn2Hi, Row<float>::V{} + kExpLn2Lo,
+    Row<float>::V{} + kExpC0, Row<float>::V{} + kExpC1, Row<float>::V{} + kExpC2,
+    Row<float>::V{} + kExpC3, Row<float>::V{} + kExpC4, Row<float>::V{} + kExpC5,
     Row<float>::V{} + 1.0f};
 D2GS_TILE_INLINE const ExpConstants* exp_constants() {
   const ExpConstants* p = &kExpConstants;

@@ -3,6 +3,9 @@
 // requests with the CUDA built-ins, and kernel_shell is the one __global__ function every kernel body is
 // launched through. The CPU emulator (render/kernels/emulate.hpp) answers the same requests on the host.
 #include <cuda_runtime.h>
+#include <string.h>
+
+#include <type_traits>
 
 #include "d2gs/render/kernels/block.hpp"
 
@@ -44,10 +47,42 @@ struct DeviceBlock {
     __syncthreads();
 #endif
   }
+  D2GS_HD render::kernels::Dim block_idx() const {
+    render::kernels::Dim d;
+#if defined(__CUDA_ARCH__)
+    d.x = static_cast<int>(blockIdx.x);
+    d.y = static_cast<int>(blockIdx.y);
+#endif
+    return d;
+  }
+  template <class T>
+  D2GS_HD int sync_count(const Reg<T>& pred) const {
+#if defined(__CUDA_ARCH__)
+    return __syncthreads_count(pred.value != T{} ? 1 : 0);
+#else
+    return (void)pred, 0;
+#endif
+  }
+  // Scalars go through the built-in shuffles; a struct (the reductions' gradient records) one 32-bit
+  // word at a time, every word from the same source lane.
+  template <class T, class Op>
+  D2GS_HD static T shuffle_words(const T& v, Op op) {
+    if constexpr (std::is_arithmetic_v<T>) {
+      return op(v);
+    } else {
+      static_assert(sizeof(T) % 4 == 0 && std::is_trivially_copyable_v<T>, "shuffle of a struct of 32-bit words");
+      unsigned words[sizeof(T) / 4];
+      memcpy(words, &v, sizeof(T));
+      for (unsigned& w : words) w = op(w);
+      T out;
+      memcpy(&out, words, sizeof(T));
+      return out;
+    }
+  }
   template <class T>
   D2GS_HD void shfl_up(Reg<T>& dst, const Reg<T>& src, int delta) const {
 #if defined(__CUDA_ARCH__)
-    dst.value = __shfl_up_sync(0xffffffffu, src.value, static_cast<unsigned>(delta));
+    dst.value = shuffle_words(src.value, [delta](auto w) { return __shfl_up_sync(0xffffffffu, w, static_cast<unsigned>(delta)); });
 #else
     (void)dst, (void)src, (void)delta;
 #endif
@@ -55,15 +90,33 @@ struct DeviceBlock {
   template <class T>
   D2GS_HD void shfl_down(Reg<T>& dst, const Reg<T>& src, int delta) const {
 #if defined(__CUDA_ARCH__)
-    dst.value = __shfl_down_sync(0xffffffffu, src.value, static_cast<unsigned>(delta));
+    dst.value = shuffle_words(src.value, [delta](auto w) { return __shfl_down_sync(0xffffffffu, w, static_cast<unsigned>(delta)); });
 #else
     (void)dst, (void)src, (void)delta;
 #endif
   }
   template <class T>
+  D2GS_HD void warp_any(Reg<int>& dst, const Reg<T>& src) const {
+#if defined(__CUDA_ARCH__)
+    dst.value = __any_sync(0xffffffffu, src.value != T{}) ? 1 : 0;
+#else
+    (void)dst, (void)src;
+#endif
+  }
+  // `active` is warp-uniform (a warp_any result), so the whole warp takes the shuffle or skips it.
+  template <class T>
+  D2GS_HD void shfl_down_if(const Reg<int>& active, Reg<T>& dst, const Reg<T>& src, int delta) const {
+#if defined(__CUDA_ARCH__)
+    if (active.value)
+      dst.value = shuffle_words(src.value, [delta](auto w) { return __shfl_down_sync(0xffffffffu, w, static_cast<unsigned>(delta)); });
+#else
+    (void)active, (void)dst, (void)src, (void)delta;
+#endif
+  }
+  template <class T>
   D2GS_HD void shfl_xor(Reg<T>& dst, const Reg<T>& src, int mask) const {
 #if defined(__CUDA_ARCH__)
-    dst.value = __shfl_xor_sync(0xffffffffu, src.value, mask);
+    dst.value = shuffle_words(src.value, [mask](auto w) { return __shfl_xor_sync(0xffffffffu, w, mask); });
 #else
     (void)dst, (void)src, (void)mask;
 #endif

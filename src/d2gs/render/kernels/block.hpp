@@ -20,7 +20,16 @@
 //   b.shfl_up/down/xor(dst, src, k)
 //                         a warp shuffle (__shfl_*_sync over the full warp) called by every thread, outside
 //                         f: dst[t] = src[source lane], in emulation by CUDA's definition of the source lane.
+//                         A struct register is shuffled one 32-bit word at a time on the GPU.
+//   b.warp_any(dst, src)  __any_sync: dst[t] = 1 where some lane of t's warp has src != 0 (outside f).
+//   b.shfl_down_if(active, dst, src, k)
+//                         shfl_down taken only by the warps where the warp-uniform `active` (a warp_any
+//                         result) is set, as `if (active) dst = __shfl_down_sync(...)`; the emulator
+//                         rejects an `active` that differs within a warp.
 //   b.atomic_add(p, v)    atomicAdd inside f; in emulation a plain add in thread order.
+//   b.sync_count(r)       __syncthreads_count(r[t] != 0), called by every thread outside f: a barrier that
+//                         returns to all threads how many of them hold a non-zero register.
+//   b.block_idx()         blockIdx, outside f too (loop bounds that are the same for the whole block).
 //
 // Thread indices follow CUDA: x fastest, lane = linear index % 32. Per-thread math lives in D2GS_HD
 // functions (projection_math.hpp, sh_math.hpp, raster_math.hpp) shared with the CPU reference backend.

@@ -57,8 +57,9 @@ public:
       fail("kernel emulation: a block of {}x{} threads is not whole warps", block.x, block.y);
     if (schedule_ == Schedule::SyncVisibility && shared_bytes_ > 0) {
       const std::size_t n = static_cast<std::size_t>(threads_per_block());
-      views_.assign(n * shared_bytes_, 0);
-      written_.assign(n * shared_bytes_, 0);
+      views_.resize(n);
+      written_.resize(n);
+      dirty_.assign(n, 0);
       start_segment();
     }
   }
@@ -75,17 +76,32 @@ public:
       return;
     }
     // SyncVisibility: each thread runs on its own view of shared memory (the last sync's contents and
-    // its own writes since); the views are merged into the block's shared memory after the phase.
+    // its own writes since); the views are merged into the block's shared memory after the phase. A
+    // thread that has not written since the sync sees the base itself (no copy of its own is kept), so
+    // phases that only read shared memory cost one comparison per thread.
+    bool holds_base = false;  // shared_ holds base_ (after the last phase it holds the merge)
     for (int k = 0; k < n; ++k) {
-      unsigned char* view = &views_[static_cast<std::size_t>(k) * shared_bytes_];
-      unsigned char* written = &written_[static_cast<std::size_t>(k) * shared_bytes_];
-      std::memcpy(shared_, view, shared_bytes_);
+      const std::size_t ks = static_cast<std::size_t>(k);
+      const unsigned char* view = dirty_[ks] ? views_[ks].data() : base_.data();
+      if (dirty_[ks] || !holds_base) std::memcpy(shared_, view, shared_bytes_);
       f(thread(k));
+      if (std::memcmp(shared_, view, shared_bytes_) == 0) {
+        holds_base = !dirty_[ks];
+        continue;
+      }
+      if (!dirty_[ks]) {
+        views_[ks].assign(base_.begin(), base_.end());
+        written_[ks].assign(shared_bytes_, 0);
+        dirty_[ks] = 1;
+      }
+      unsigned char* own = views_[ks].data();
+      unsigned char* written = written_[ks].data();
       for (std::size_t i = 0; i < shared_bytes_; ++i)
-        if (shared_[i] != view[i]) {
-          view[i] = shared_[i];
+        if (shared_[i] != own[i]) {
+          own[i] = shared_[i];
           written[i] = 1;
         }
+      holds_base = false;
     }
     merge();
   }
@@ -118,6 +134,40 @@ public:
     shuffle(dst, src, [mask](int lane) { return (lane ^ mask) % kWarpSize; });
   }
 
+  // __any_sync(full mask, src[t] != 0): dst[t] = 1 where some lane of t's warp holds a non-zero value.
+  template <class T>
+  void warp_any(Reg<int>& dst, const Reg<T>& src) {
+    const int n = threads_per_block();
+    for (int base = 0; base < n; base += kWarpSize) {
+      int any = 0;
+      for (int l = 0; l < kWarpSize; ++l) any |= src.at(base + l) != T{} ? 1 : 0;
+      for (int l = 0; l < kWarpSize; ++l) dst.at(base + l) = any;
+    }
+  }
+  // `if (active) dst = __shfl_down_sync(full mask, src, delta)` with `active` the same in every lane of a
+  // warp (a warp vote's result): the warps where it is 0 skip the shuffle, dst untouched. A warp whose
+  // lanes disagree would shuffle with lanes that are not there (undefined on the GPU): an error here.
+  template <class T>
+  void shfl_down_if(const Reg<int>& active, Reg<T>& dst, const Reg<T>& src, int delta) {
+    const int n = threads_per_block();
+    for (int base = 0; base < n; base += kWarpSize)
+      for (int l = 1; l < kWarpSize; ++l)
+        if ((active.at(base + l) != 0) != (active.at(base) != 0))
+          fail("kernel emulation: a shuffle taken by part of warp {} of block ({}, {}) only", base / kWarpSize,
+               index_.x, index_.y);
+    shuffle(dst, src, [delta](int lane) { return lane + delta < kWarpSize ? lane + delta : lane; }, &active);
+  }
+
+  // __syncthreads_count(pred[t] != 0).
+  template <class T>
+  int sync_count(const Reg<T>& pred) {
+    sync();
+    int count = 0;
+    for (int i = 0; i < threads_per_block(); ++i) count += pred.at(i) != T{} ? 1 : 0;
+    return count;
+  }
+  Dim block_idx() const { return index_; }
+
   template <class T>
   T atomic_add(T* address, T value) const {
     const T old = *address;
@@ -136,13 +186,15 @@ private:
     t.dim_y = block_.y;
     return t;
   }
-  // All lanes read before any writes (src is copied first, so dst may be src).
+  // All lanes read before any writes (src is copied first, so dst may be src); with `active`, only the
+  // lanes where it is set.
   template <class T, class Source>
-  void shuffle(Reg<T>& dst, const Reg<T>& src, Source source_lane) {
+  void shuffle(Reg<T>& dst, const Reg<T>& src, Source source_lane, const Reg<int>* active = nullptr) {
     const int n = threads_per_block();
     std::vector<T> snapshot(static_cast<std::size_t>(n));
     for (int i = 0; i < n; ++i) snapshot[static_cast<std::size_t>(i)] = src.at(i);
     for (int i = 0; i < n; ++i) {
+      if (active && active->at(i) == 0) continue;
       const int warp_base = i - i % kWarpSize;
       dst.at(i) = snapshot[static_cast<std::size_t>(warp_base + source_lane(i % kWarpSize))];
     }
@@ -152,11 +204,13 @@ private:
   // by two threads with different values is a race.
   void merge() {
     std::memcpy(shared_, base_.data(), shared_bytes_);
+    if (std::find(dirty_.begin(), dirty_.end(), 1) == dirty_.end()) return;
     std::vector<int> writer(shared_bytes_, -1);
     const int n = threads_per_block();
     for (int k = 0; k < n; ++k) {
-      const unsigned char* view = &views_[static_cast<std::size_t>(k) * shared_bytes_];
-      const unsigned char* written = &written_[static_cast<std::size_t>(k) * shared_bytes_];
+      if (!dirty_[static_cast<std::size_t>(k)]) continue;
+      const unsigned char* view = views_[static_cast<std::size_t>(k)].data();
+      const unsigned char* written = written_[static_cast<std::size_t>(k)].data();
       for (std::size_t i = 0; i < shared_bytes_; ++i) {
         if (!written[i]) continue;
         if (writer[i] >= 0 && shared_[i] != view[i])
@@ -170,16 +224,16 @@ private:
   }
   void start_segment() {
     base_.assign(shared_, shared_ + shared_bytes_);
-    const std::size_t n = static_cast<std::size_t>(threads_per_block());
-    for (std::size_t k = 0; k < n; ++k) std::memcpy(&views_[k * shared_bytes_], base_.data(), shared_bytes_);
-    std::fill(written_.begin(), written_.end(), 0);
+    std::fill(dirty_.begin(), dirty_.end(), 0);
   }
 
   Dim grid_, block_, index_;
   Schedule schedule_;
   unsigned char* shared_ = nullptr;
   std::size_t shared_bytes_ = 0;
-  std::vector<unsigned char> base_, views_, written_;
+  std::vector<unsigned char> base_;
+  std::vector<std::vector<unsigned char>> views_, written_;  // per thread, kept while dirty_
+  std::vector<unsigned char> dirty_;                          // the thread wrote since the last sync
   int syncs_ = 0;
 };
 

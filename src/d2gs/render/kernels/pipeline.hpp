@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "d2gs/core/error.hpp"
+#include "d2gs/render/kernels/composite_kernels.hpp"
 #include "d2gs/render/kernels/intersect_kernels.hpp"
 #include "d2gs/render/kernels/projection_kernels.hpp"
 #include "d2gs/render/kernels/scan_kernels.hpp"
@@ -49,6 +50,22 @@ inline int tile_id_bits(int tiles) {
   return bits;
 }
 
+// Launches Kernel<Smooth, Fused> for the run-time choices (both compiled).
+template <template <bool, bool> class Kernel, class Backend, class Args>
+void launch_composite(Backend& backend, int blocks, const Args& args, bool smooth, bool fused) {
+  if (smooth) {
+    if (fused)
+      backend.template launch<Kernel<true, true>>(blocks, kCompositeBlock, args);
+    else
+      backend.template launch<Kernel<true, false>>(blocks, kCompositeBlock, args);
+  } else {
+    if (fused)
+      backend.template launch<Kernel<false, true>>(blocks, kCompositeBlock, args);
+    else
+      backend.template launch<Kernel<false, false>>(blocks, kCompositeBlock, args);
+  }
+}
+
 template <class Backend>
 class StagePipeline final : public StageRunner {
 public:
@@ -66,6 +83,8 @@ public:
     if (camera.width <= 0 || camera.height <= 0) fail("stages: camera size {}x{} is empty", camera.width, camera.height);
     n_ = model.count;
     if (n_ > static_cast<std::size_t>(1) << 30) fail("stages: {} Gaussians exceed the int32 indices", n_);
+    has_model_ = true;
+    composited_ = composite_grads_ = false;
     const int n = static_cast<int>(n_);
     rest_count_ = model.sh_rest_count();
     camera_ = camera;
@@ -181,12 +200,135 @@ public:
   }
 
   const BackwardStages& backward(const ProjectedGradsIn& g) override {
-    const int n = static_cast<int>(n_);
+    if (!has_model_) fail("stages: backward() needs a forward() first");
     backend_.upload(d_mean2d_, g.mean2d, n_ * 2);
     backend_.upload(d_conic_, g.conic, n_ * 3);
     backend_.upload(d_depth_, g.depth, n_);
     backend_.upload(d_opacity_, g.opacity, n_);
     backend_.upload(d_color_, g.color, n_ * 3);
+    composite_grads_ = false;
+    return model_backward();
+  }
+
+  const BackwardStages& backward_from_composite() override {
+    if (!has_model_ || !composite_grads_)
+      fail("stages: backward_from_composite() needs forward(), composite() and composite_backward() first");
+    return model_backward();
+  }
+
+  void load_projected(const ProjectedIn& in) override {
+    if (in.width <= 0 || in.height <= 0) fail("stages: image size {}x{} is empty", in.width, in.height);
+    if (in.n > static_cast<std::size_t>(1) << 30) fail("stages: {} Gaussians exceed the int32 indices", in.n);
+    n_ = in.n;
+    has_model_ = composited_ = composite_grads_ = false;
+    camera_.width = in.width;
+    camera_.height = in.height;
+    out_.tiles_x = (in.width + kTileSize - 1) / kTileSize;
+    out_.tiles_y = (in.height + kTileSize - 1) / kTileSize;
+    const std::size_t tiles = static_cast<std::size_t>(out_.tiles_x) * out_.tiles_y;
+    backend_.upload(mean2d_, in.mean2d, n_ * 2);
+    backend_.upload(conic_, in.conic, n_ * 3);
+    backend_.upload(depth_, in.depth, n_);
+    backend_.upload(opacity_, in.opacity, n_);
+    backend_.upload(color_, in.color, n_ * 3);
+    backend_.upload(gaussians_sorted_, in.isect_gaussians, in.intersections);
+    backend_.upload(ranges_, in.tile_ranges, tiles * 2);
+  }
+
+  const CompositeStages& composite(const CompositeOptions& options) override {
+    const int width = camera_.width, height = camera_.height;
+    if (width <= 0 || height <= 0) fail("stages: composite() needs forward() or load_projected() first");
+    composite_options_ = options;
+    const std::size_t pixels = static_cast<std::size_t>(width) * height;
+    rgb_.resize(pixels * 3);
+    alpha_.resize(pixels);
+    pixel_depth_.resize(pixels);
+    final_t_.resize(pixels);
+    n_contrib_.resize(pixels);
+    CompositeFwdArgs c;
+    c.width = width;
+    c.height = height;
+    c.tiles_x = out_.tiles_x;
+    c.mean2d = mean2d_.data();
+    c.conic = conic_.data();
+    c.opacity = opacity_.data();
+    c.color = color_.data();
+    c.depth = depth_.data();
+    c.isect_gaussians = gaussians_sorted_.data();
+    c.tile_ranges = ranges_.data();
+    for (int k = 0; k < 3; ++k) c.background[k] = options.background[k];
+    c.rgb = rgb_.data();
+    c.alpha = alpha_.data();
+    c.out_depth = pixel_depth_.data();
+    c.final_t = final_t_.data();
+    c.n_contrib = n_contrib_.data();
+    launch_composite<CompositeFwdKernel>(backend_, out_.tiles_x * out_.tiles_y, c, options.smooth_cutoff,
+                                         options.fused_multiply_add);
+    backend_.download(composite_out_.rgb, rgb_, pixels * 3);
+    backend_.download(composite_out_.alpha, alpha_, pixels);
+    backend_.download(composite_out_.depth, pixel_depth_, pixels);
+    backend_.download(composite_out_.final_transmittance, final_t_, pixels);
+    backend_.download(composite_out_.n_contrib, n_contrib_, pixels);
+    composited_ = true;
+    composite_grads_ = false;
+    return composite_out_;
+  }
+
+  const CompositeGrads& composite_backward(const float* d_rgb, const float* d_alpha, const float* d_depth) override {
+    if (!composited_) fail("stages: composite_backward() needs composite() first");
+    const int width = camera_.width, height = camera_.height;
+    const std::size_t pixels = static_cast<std::size_t>(width) * height;
+    if (d_rgb) backend_.upload(d_rgb_, d_rgb, pixels * 3);
+    if (d_alpha) backend_.upload(d_alpha_, d_alpha, pixels);
+    if (d_depth) backend_.upload(d_pixel_depth_, d_depth, pixels);
+    d_mean2d_.resize(n_ * 2);
+    d_conic_.resize(n_ * 3);
+    d_depth_.resize(n_);
+    d_opacity_.resize(n_);
+    d_color_.resize(n_ * 3);
+    backend_.zero(d_mean2d_, n_ * 2);
+    backend_.zero(d_conic_, n_ * 3);
+    backend_.zero(d_depth_, n_);
+    backend_.zero(d_opacity_, n_);
+    backend_.zero(d_color_, n_ * 3);
+    CompositeBwdArgs c;
+    c.width = width;
+    c.height = height;
+    c.tiles_x = out_.tiles_x;
+    c.mean2d = mean2d_.data();
+    c.conic = conic_.data();
+    c.opacity = opacity_.data();
+    c.color = color_.data();
+    c.depth = depth_.data();
+    c.isect_gaussians = gaussians_sorted_.data();
+    c.tile_ranges = ranges_.data();
+    for (int k = 0; k < 3; ++k) c.background[k] = composite_options_.background[k];
+    c.clamp_pass_through = composite_options_.clamp_pass_through;
+    c.final_t = final_t_.data();
+    c.n_contrib = n_contrib_.data();
+    c.d_rgb = d_rgb ? d_rgb_.data() : nullptr;
+    c.d_alpha = d_alpha ? d_alpha_.data() : nullptr;
+    c.d_depth = d_depth ? d_pixel_depth_.data() : nullptr;
+    c.d_mean2d = d_mean2d_.data();
+    c.d_conic = d_conic_.data();
+    c.d_opacity = d_opacity_.data();
+    c.d_color = d_color_.data();
+    c.d_splat_depth = d_depth_.data();
+    launch_composite<CompositeBwdKernel>(backend_, out_.tiles_x * out_.tiles_y, c, composite_options_.smooth_cutoff,
+                                         composite_options_.fused_multiply_add);
+    backend_.download(composite_grads_out_.mean2d, d_mean2d_, n_ * 2);
+    backend_.download(composite_grads_out_.conic, d_conic_, n_ * 3);
+    backend_.download(composite_grads_out_.depth, d_depth_, n_);
+    backend_.download(composite_grads_out_.opacity, d_opacity_, n_);
+    backend_.download(composite_grads_out_.color, d_color_, n_ * 3);
+    composite_grads_ = true;
+    return composite_grads_out_;
+  }
+
+private:
+  // Projection and SH backward from the projected gradients in d_mean2d_ ... d_color_.
+  const BackwardStages& model_backward() {
+    const int n = static_cast<int>(n_);
     const std::size_t rest = n_ * static_cast<std::size_t>(rest_count_) * 3;
     d_means_.resize(n_ * 3);
     d_log_scales_.resize(n_ * 3);
@@ -240,6 +382,7 @@ public:
     return grads_;
   }
 
+public:
   std::vector<int> inclusive_scan(const std::vector<int>& values) override {
     backend_.upload(scan_data_, values.data(), values.size());
     kernels::inclusive_scan(backend_, scan_data_.data(), static_cast<int>(values.size()), scan_levels_);
@@ -257,6 +400,10 @@ private:
   std::size_t n_ = 0;
   int rest_count_ = 0;
   bool has_multiplier_ = false;
+  bool has_model_ = false;        // forward() ran (not load_projected())
+  bool composited_ = false;       // composite() ran on the current Gaussians
+  bool composite_grads_ = false;  // composite_backward() left gradients in d_mean2d_ ...
+  CompositeOptions composite_options_{};
   CameraParams<float> camera_{};
   StageOptions options_{};
   Array<float> means_, log_scales_, quats_, opacity_logits_, multiplier_, sh_dc_, sh_rest_;
@@ -268,8 +415,12 @@ private:
   Array<std::int32_t> gaussians_, gaussians_sorted_;
   Array<float> d_mean2d_, d_conic_, d_depth_, d_opacity_, d_color_;
   Array<float> d_means_, d_log_scales_, d_quats_, d_opacity_logits_, d_sh_dc_, d_sh_rest_;
+  Array<float> rgb_, alpha_, pixel_depth_, final_t_, d_rgb_, d_alpha_, d_pixel_depth_;
+  Array<int> n_contrib_;
   ForwardStages out_;
   BackwardStages grads_;
+  CompositeStages composite_out_;
+  CompositeGrads composite_grads_out_;
 };
 
 }  // namespace d2gs::render::kernels

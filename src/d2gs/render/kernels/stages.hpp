@@ -3,7 +3,7 @@
 // (cuda::make_device_stages, render/cuda/stages.hpp) and the CPU emulation of the same kernels
 // (make_emulated_stages). Inputs and outputs are host arrays, so tests compare every stage's output with
 // the CPU reference backend; inside, the stages run back to back on the device (kernels/pipeline.hpp)
-// with one scalar read back (the number of intersections).
+// with one scalar read back (the number of intersections); compositing follows on the same device arrays.
 #include <cstdint>
 #include <memory>
 #include <vector>
@@ -50,6 +50,44 @@ struct BackwardStages {
   std::vector<float> means, log_scales, quats, opacity_logits, sh_dc, sh_rest;
 };
 
+// Alpha compositing (kernels/composite_kernels.hpp) of the last forward() or load_projected().
+struct CompositeOptions {
+  float background[3] = {0, 0, 0};
+  bool smooth_cutoff = false;       // raster_math.hpp's smooth cutoff (gradient checks); forward's alpha_min then
+                                    // kSmoothAlphaLo
+  bool clamp_pass_through = false;  // the gradient through alpha = min(0.99, o G) (backward only)
+  // Whether the per-pixel multiply-adds are fused, as the CPU tile loops' fmadd at x86-64-v3/v4 (and the
+  // natural choice on a GPU), or not, as at the SSE2 baseline (composite_math.hpp).
+  bool fused_multiply_add = true;
+};
+
+// Compositing's outputs, downloaded (H x W, rgb interleaved): cpu::composite_forward's and its PixelState.
+struct CompositeStages {
+  std::vector<float> rgb, alpha, depth, final_transmittance;
+  std::vector<int> n_contrib;
+};
+
+// dL/d of the projected quantities from compositing's backward, downloaded (N-sized, zero for the
+// Gaussians of no tile): cpu::composite_backward's ProjectedGrads.
+struct CompositeGrads {
+  std::vector<float> mean2d, conic, depth, opacity, color;
+};
+
+// Projected Gaussians and sorted tile lists given as host arrays, for compositing alone (tests feed it the
+// CPU stages' outputs, so that compositing is compared on identical inputs).
+struct ProjectedIn {
+  int width = 0, height = 0;
+  std::size_t n = 0;
+  const float* mean2d = nullptr;   // N x 2
+  const float* conic = nullptr;    // N x 3
+  const float* depth = nullptr;    // N
+  const float* opacity = nullptr;  // N
+  const float* color = nullptr;    // N x 3
+  std::size_t intersections = 0;
+  const int* isect_gaussians = nullptr;  // M: every tile's Gaussians front to back, tiles in order
+  const int* tile_ranges = nullptr;      // tiles x 2: [begin, end) into isect_gaussians
+};
+
 class StageRunner {
 public:
   virtual ~StageRunner() = default;
@@ -59,6 +97,16 @@ public:
                                        const CameraParams<float>& camera, const StageOptions& options) = 0;
   // Projection and SH backward for the model, multiplier and camera of the last forward (alive).
   virtual const BackwardStages& backward(const ProjectedGradsIn& grads) = 0;
+  // Compositing of the last forward()'s (or load_projected()'s) Gaussians and tile lists.
+  virtual const CompositeStages& composite(const CompositeOptions& options) = 0;
+  // Compositing's backward for the last composite(), from dL/d rgb, alpha, depth (H x W x 3, H x W, H x W;
+  // each may be null = zero). The gradients stay on the device for backward_from_composite().
+  virtual const CompositeGrads& composite_backward(const float* d_rgb, const float* d_alpha, const float* d_depth) = 0;
+  // Projection and SH backward from the last composite_backward()'s gradients, all on the device (the
+  // model, multiplier and camera of the last forward(), alive).
+  virtual const BackwardStages& backward_from_composite() = 0;
+  // Replaces the outputs of forward() by host arrays (then only composite and composite_backward apply).
+  virtual void load_projected(const ProjectedIn& in) = 0;
   // The device scan alone (kernels/scan_kernels.hpp), for tests of sizes the scenes do not reach.
   virtual std::vector<int> inclusive_scan(const std::vector<int>& values) = 0;
 };
