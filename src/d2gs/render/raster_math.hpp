@@ -103,4 +103,140 @@ D2GS_HD bool alpha_row_span(T mx, T dy, T qa, T qb, T qc, T reach, T inv_qa, T& 
   return true;
 }
 
+// ---- The tiles of a Gaussian's rectangle that the compositing would not visit ----
+//
+// A Gaussian's tile rectangle (tile_rect intersected with the tiles of alpha_pixel_box) holds every tile
+// its ellipse q(d) = d^T Q d <= reach meets, and, for an elongated tilted ellipse, many it misses. The tile
+// loops (SplatInTile::init in cpu/composite_tiles.ipp, the chord of alpha_row_span) visit row vector c of
+// pixel row y of a tile only when y is a row of the image and of the alpha box, and, with dy = my - y,
+//   disc = qa r1 - dy^2 det >= 0,   r1 = reach * 1.001 + 1e-4,   det = qa qc - qb qb,
+//   [centre - half - 1, centre + half + 1] meets the vector's columns,
+//   centre = mx + qb dy / qa,   half = sqrt(disc) / qa.
+// A (Gaussian, tile) pair none of whose row vectors passes contributes nothing: no pixel composites the
+// Gaussian, so the images, the per-pixel contributor counts' meaning and the backward's replay are
+// unchanged, and the pair's gradient entries are (signed) zeros; a Gaussian's gradient is the sum of its
+// pairs' entries starting from +0, and adding a zero to a sum that starts from +0 changes no bit (a sum
+// of floats is -0 only when both terms are). tile_reach_keeps drops a tile only in that case.
+//
+// The test. With k = qb / qa and e = det / qa, row dy passes for some column of the tile (columns
+// X0 ... X1) only if dist(mx + k dy, [X0 - 1, X1 + 1]) <= half, that is (squaring, times qa)
+//   f(dy) = qa dist(k dy, [a, b])^2 + e dy^2 <= r1,   [a, b] = [X0 - 1 - mx, X1 + 1 - mx]
+// (which implies disc >= 0). f is convex (the distance of a linear function to an interval is convex
+// and non-negative, so is its square; e > 0) and differentiable, so its minimisers over the reals solve
+// f' = 0: dy = 0 where k dy lies in [a, b], dy = qa k a / (qa k^2 + e) where k dy < a, and
+// dy = qa k b / (qa k^2 + e) where k dy > b. The minimum of f over the tile's rows [p, q] is therefore f
+// at one of those three points clamped to [p, q], and the smallest of f at the three clamped points is
+// exactly min f over [p, q] (each is a point of [p, q]). The tile is dropped when it exceeds R >= r1.
+//
+// Rounding. Margins far beyond the rounding of either side make the test err only towards keeping:
+//  - det: this det and the tile loops' float det may differ by up to 2 eps (qa qc + qb^2) (each rounds
+//    its products and difference; FMA contraction, on the GPU or with -march=native, rounds one product
+//    less). The test uses det - 4 eps (qa qc + qb^2), below the tile loops' det, which only lengthens
+//    the chords; when that is not positive (an ellipse with an axis ratio beyond about 2000) every tile
+//    is kept.
+//  - reach: R = reach * 1.002 + 2e-4, 1e-3 relative above r1. That covers the rounding of disc (within
+//    the chord's rows its two terms are at most about qa r1, so it rounds by a few eps relative to
+//    qa r1), of r1 and of a logarithm that another math library rounds differently, of f here (a sum of
+//    non-negative terms: a few eps relative), and of the three minimisers (an error in the point enters
+//    f to second order: at most (a few eps)^2 times the axis-ratio squared, relative, below 1e-6 for the
+//    axis ratios the det bound admits).
+//  - positions: the rows' dy range and [a, b] are widened by 1/16 pixel + 16 eps (|mx| + |my| + 2
+//    extent + 64), extent = sqrt(R / qa) + |k| sqrt(R / e) (bounds of half and of |k dy| within the
+//    ellipse), beyond the rounding of dy, centre, half and the chord's ends there and of a, b, p, q here
+//    (each a few eps of those magnitudes).
+// tests/render/test_tile_cull.cpp checks, for random and elongated Gaussians, that no pixel of a dropped
+// tile reaches the alpha cutoff and no row of it has a chord (alpha_row_span) that meets the tile, and
+// that renders and gradients are bit-identical with and without the test.
+template <typename T>
+D2GS_HD T hd_abs(T a) {
+  return a < T(0) ? -a : a;
+}
+template <typename T>
+D2GS_HD constexpr T hd_epsilon() {  // machine epsilon of T (float or double)
+  return sizeof(T) == sizeof(float) ? T(1.1920928955078125e-7) : T(2.220446049250313e-16);
+}
+
+// Per Gaussian, what tile_reach_keeps needs. `all`: keep every tile (no test).
+template <typename T>
+struct TileReach {
+  bool all = true;
+  T mx = 0, my = 0, qa = 0, k = 0, e = 0, c1 = 0, R = 0, margin = 0;
+  int y0 = 0, y1 = -1;  // the alpha box's pixel rows (inclusive)
+  int height = 0;       // image rows
+};
+
+// reach = 2 ln(opacity / alpha_min) (the Splat's), box = alpha_pixel_box's.
+template <typename T>
+D2GS_HD TileReach<T> tile_reach_setup(T mx, T my, const T conic[3], T reach, const int box[4], int height) {
+  TileReach<T> t;
+  const T qa = conic[0], qb = conic[1], qc = conic[2];
+  const T eps = hd_epsilon<T>();
+  const T det_lo = (qa * qc - qb * qb) - T(4) * eps * (qa * qc + qb * qb);
+  if (!(qa > T(0)) || !(det_lo > T(0)) || !(reach > T(0))) return t;
+  t.all = false;
+  t.mx = mx;
+  t.my = my;
+  t.y0 = box[2];
+  t.y1 = box[3];
+  t.height = height;
+  const T inv_qa = T(1) / qa;
+  t.qa = qa;
+  t.k = qb * inv_qa;
+  t.e = det_lo * inv_qa;
+  t.c1 = qa * t.k / (qa * t.k * t.k + t.e);
+  t.R = reach * T(1.002) + T(2e-4);
+  const T extent = hd_sqrt(t.R * inv_qa) + hd_abs(t.k) * hd_sqrt(t.R / t.e);
+  t.margin = T(0.0625) + T(16) * eps * (hd_abs(mx) + hd_abs(my) + T(2) * extent + T(64));
+  return t;
+}
+
+// The dy = my - y range [p, q] of the rows of tile row ty that the tile loops may visit (image and alpha
+// box rows), widened by the margin. False when there are none.
+template <typename T>
+D2GS_HD bool tile_reach_rows(const TileReach<T>& t, int ty, T& p, T& q) {
+  const int y_lo = hd_max(ty * kTileSize, t.y0);
+  const int y_hi = hd_min(hd_min(ty * kTileSize + kTileSize - 1, t.height - 1), t.y1);
+  if (y_lo > y_hi) return false;
+  p = (t.my - T(y_hi)) - t.margin;
+  q = (t.my - T(y_lo)) + t.margin;
+  return true;
+}
+
+// Whether tile column tx, in the tile row of [p, q], may hold a row vector the tile loops visit.
+template <typename T>
+D2GS_HD bool tile_reach_keeps(const TileReach<T>& t, int tx, T p, T q) {
+  const T a = (T(tx * kTileSize - 1) - t.mx) - t.margin;
+  const T b = (T(tx * kTileSize + kTileSize) - t.mx) + t.margin;
+  T f[3];
+  const T at[3] = {T(0), t.c1 * a, t.c1 * b};
+  for (int j = 0; j < 3; ++j) {
+    const T dy = hd_min(q, hd_max(p, at[j]));
+    const T u = t.k * dy;
+    const T dist = hd_max(hd_max(a - u, u - b), T(0));
+    f[j] = t.qa * dist * dist + t.e * dy * dy;
+  }
+  return !(hd_min(f[0], hd_min(f[1], f[2])) > t.R);  // keeps on NaN
+}
+
+// Calls emit(tx, ty) for the tiles of rect [x0, x1) x [y0, y1) that tile_reach_keeps keeps, row by row
+// and left to right, and returns their count. In each tile row the tiles between the first and the last
+// kept one are kept without a test (the kept tiles of a row are contiguous in exact arithmetic: the
+// ellipse's part within the row is convex; keeping more is always safe).
+template <typename T, class Emit>
+D2GS_HD int for_each_reached_tile(const TileReach<T>& t, const int rect[4], Emit&& emit) {
+  int count = 0;
+  for (int ty = rect[1]; ty < rect[3]; ++ty) {
+    int x0 = rect[0], x1 = rect[2];
+    if (!t.all) {
+      T p = 0, q = 0;
+      if (!tile_reach_rows(t, ty, p, q)) continue;
+      while (x0 < x1 && !tile_reach_keeps(t, x0, p, q)) ++x0;
+      while (x1 - 1 > x0 && !tile_reach_keeps(t, x1 - 1, p, q)) --x1;
+    }
+    for (int tx = x0; tx < x1; ++tx) emit(tx, ty);
+    count += x1 - x0;
+  }
+  return count;
+}
+
 }  // namespace d2gs::render
