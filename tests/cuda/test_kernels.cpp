@@ -244,7 +244,7 @@ void expect_binning_equal(const ForwardStages& f, const render::cpu::Binning<flo
   for (int c : counts) culled += static_cast<std::size_t>(c);
   culled = area - culled;
   EXPECT_EQ(rect_mismatches, 0u) << label;
-  EXPECT_EQ(f.tile_counts, counts) << label;  // the tiles of each rectangle kept (tile_reach_keeps)
+  EXPECT_EQ(f.tile_counts, counts) << label;  // the tiles of each rectangle kept (tile_reach_columns)
   std::printf("%s: %zu of %zu rectangle tiles culled\n", label.c_str(), culled, area);
   std::vector<int> offsets(n);
   std::inclusive_scan(counts.begin(), counts.end(), offsets.begin());

@@ -1,5 +1,5 @@
 // The cull of the tiles of a Gaussian's rectangle that its ellipse misses (raster_math.hpp,
-// tile_reach_keeps; cpu/binning.cpp): a dropped tile has no row whose chord (the tile loops' test,
+// tile_reach_columns; cpu/binning.cpp): a dropped tile has no row whose chord (the tile loops' test,
 // alpha_row_span) meets it and no pixel centre where alpha reaches the cutoff, and renders and gradients
 // are bit-identical with and without the cull.
 #include <algorithm>
@@ -123,7 +123,7 @@ CullStats check_dropped_tiles(const Projected<T>& p, int width, int height, doub
   // Not vacuous, and close to the chord test: nearly every tile no chord meets is dropped, except those of
   // the Gaussians too elongated for the test (axis ratio beyond ~2000: all kept).
   EXPECT_GT(st.dropped, st.rect_tiles / 10) << label;
-  EXPECT_GE(double(st.dropped), 0.99 * double(st.chord_empty - st.untested_chord_empty)) << label;
+  EXPECT_GE(double(st.dropped), 0.97 * double(st.chord_empty - st.untested_chord_empty)) << label;
   std::printf("%s: %zu rectangle tiles, %zu dropped, %zu met by no chord (%zu of them of the %zu Gaussians too "
               "elongated to test)\n",
               label.c_str(), st.rect_tiles, st.dropped, st.chord_empty, st.untested_chord_empty, st.untested);
@@ -142,9 +142,9 @@ TEST(TileCull, DroppedTilesReachNoPixel) {
 }
 
 // A Gaussian whose conic is too elongated for the determinant's bound (or degenerate) keeps its whole
-// rectangle; a round one keeps every tile its circle meets.
-TEST(TileCull, DegenerateConicsKeepTheirRectangle) {
-  const int box[4] = {-100, 100, -100, 100};
+// rectangle; a round one keeps, in each tile row, the tiles its chords meet.
+TEST(TileCull, DegenerateConicsKeepTheirRectangleARoundOneItsChords) {
+  const int box[4] = {-100, 100, -100, 100}, rect[4] = {0, 0, 8, 8};
   const float needle[3] = {1.0f, 0.9999999f, 1.0f};  // det ~ 1e-7 of qa qc: below the rounding bound
   EXPECT_TRUE(render::tile_reach_setup(10.0f, 10.0f, needle, 11.0f, box, 64).all);
   const float not_pd[3] = {-1.0f, 0.0f, 1.0f};
@@ -152,14 +152,15 @@ TEST(TileCull, DegenerateConicsKeepTheirRectangle) {
   const float round[3] = {0.01f, 0.0f, 0.01f};  // radius sqrt(11 / 0.01) ~ 33 px about (40, 40)
   const auto t = render::tile_reach_setup(40.0f, 40.0f, round, 11.0f, box, 200);
   ASSERT_FALSE(t.all);
-  float p, q;
-  ASSERT_TRUE(render::tile_reach_rows(t, 2, p, q));  // rows 32-47: the centre's tile row
-  EXPECT_TRUE(render::tile_reach_keeps(t, 2, p, q));
-  EXPECT_TRUE(render::tile_reach_keeps(t, 0, p, q));   // x 0-15: within 33 px
-  EXPECT_FALSE(render::tile_reach_keeps(t, 5, p, q));  // x 80-95: 40 px away
-  ASSERT_TRUE(render::tile_reach_rows(t, 0, p, q));   // rows 0-15
-  EXPECT_FALSE(render::tile_reach_keeps(t, 0, p, q));  // the corner tile: (15, 15) is 35 px away
-  EXPECT_TRUE(render::tile_reach_keeps(t, 2, p, q));
+  int x0, x1;
+  render::tile_reach_columns(t, 2, rect, x0, x1);  // rows 32-47: chord x 6.8 ... 73.2
+  EXPECT_EQ(x0, 0);
+  EXPECT_EQ(x1, 5);
+  render::tile_reach_columns(t, 0, rect, x0, x1);  // rows 0-15: the chord of row 15 is x 18.2 ... 61.8
+  EXPECT_EQ(x0, 1);
+  EXPECT_EQ(x1, 4);
+  render::tile_reach_columns(t, 5, rect, x0, x1);  // rows 80-95: beyond the circle
+  EXPECT_EQ(x0, x1);
 }
 
 template <typename T>

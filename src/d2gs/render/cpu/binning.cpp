@@ -74,6 +74,7 @@ void bin_gaussians(const Projected<T>& proj, int width, int height, double alpha
   const std::size_t n_tiles = static_cast<std::size_t>(tiles_x) * tiles_y;
   grow(out.rect, n * 4);
   grow(out.box, n * 4);
+  grow(out.reach, n);
   grow(out.rect_offsets, n + 1);
   grow(out.tile_count, n);
   grow(out.keys, n);
@@ -92,6 +93,7 @@ void bin_gaussians(const Projected<T>& proj, int width, int height, double alpha
     int* box = &out.box[i * 4];
     tile_rect(mx, my, proj.radii[i], tiles_x, tiles_y, r);
     if (!alpha_pixel_box(mx, my, &proj.conic[i * 3], proj.opacity[i], amin, box)) continue;
+    out.reach[i] = T(2) * hd_log(proj.opacity[i] / amin);
     // Tiles of the pixel box (pixel p lies in tile p / 16); empty ranges when the box is off-image.
     const int bx0 = box[0] < 0 ? 0 : box[0] / kTileSize;
     const int bx1 = box[1] < 0 ? 0 : box[1] / kTileSize + 1;
@@ -108,7 +110,7 @@ void bin_gaussians(const Projected<T>& proj, int width, int height, double alpha
   for (std::size_t i = 0; i < n; ++i) out.rect_offsets[i + 1] += out.rect_offsets[i];
   grow(out.rect_tiles, static_cast<std::size_t>(out.rect_offsets[n]));
 
-  // The tiles of each rectangle that the tile loops may visit (raster_math.hpp, tile_reach_keeps), in
+  // The tiles of each rectangle that the tile loops may visit (raster_math.hpp, tile_reach_columns), in
   // row-major order, at the start of the rectangle's slot of rect_tiles.
 #pragma omp parallel for schedule(static)
   for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(n); ++i) {
@@ -117,8 +119,8 @@ void bin_gaussians(const Projected<T>& proj, int width, int height, double alpha
     int count = 0;
     if (out.rect_offsets[i + 1] > out.rect_offsets[i]) {
       const TileReach<T> reach =
-          cull_tiles ? tile_reach_setup(proj.mean2d[i * 2], proj.mean2d[i * 2 + 1], &proj.conic[i * 3],
-                                        T(2) * hd_log(proj.opacity[i] / amin), &out.box[i * 4], height)
+          cull_tiles ? tile_reach_setup(proj.mean2d[i * 2], proj.mean2d[i * 2 + 1], &proj.conic[i * 3], out.reach[i],
+                                        &out.box[i * 4], height)
                      : TileReach<T>{};
       count = for_each_reached_tile(reach, rect, [&](int tx, int ty) { tiles[count++] = ty * tiles_x + tx; });
     }
@@ -156,12 +158,12 @@ void bin_gaussians(const Projected<T>& proj, int width, int height, double alpha
     s.g = proj.color[i * 3 + 1];
     s.b = proj.color[i * 3 + 2];
     s.z = proj.depth[i];
-    const int* box = &out.box[i * 4];  // alpha_pixel_box's, set for every candidate
+    const int* box = &out.box[i * 4];  // alpha_pixel_box's, set (as reach) for every candidate
     s.x0 = box[0];
     s.x1 = box[1];
     s.y0 = box[2];
     s.y1 = box[3];
-    s.reach = T(2) * hd_log(s.opacity / amin);
+    s.reach = out.reach[i];  // 2 ln(opacity / alpha_min)
     s.inv_qa = T(1) / s.qa;
     out.rank_isect_offsets[r + 1] = out.tile_count[i];
   }

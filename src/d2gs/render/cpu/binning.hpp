@@ -6,7 +6,7 @@
 // raster_math.hpp). The second restriction only drops (tile, Gaussian) pairs in which no pixel can
 // composite the Gaussian, so results are those of the original; it saves work for faint Gaussians.
 // Of that rectangle only the tiles that the tile loops may visit are kept (raster_math.hpp,
-// tile_reach_keeps: an elongated ellipse misses many tiles of its bounding rectangle); the others would
+// tile_reach_columns: an elongated ellipse misses many tiles of its bounding rectangle); the others would
 // composite nothing and receive zero gradients, so dropping them changes no result, only the tile lists
 // and the number of intersections.
 // Ordering: one stable LSD radix sort of the candidate Gaussians by the bits of their (positive) float
