@@ -63,7 +63,8 @@ void radix_sort(std::vector<std::uint32_t>& keys, std::vector<int>& ids, std::ve
 }  // namespace
 
 template <typename T>
-void bin_gaussians(const Projected<T>& proj, int width, int height, double alpha_min, Binning<T>& out) {
+void bin_gaussians(const Projected<T>& proj, int width, int height, double alpha_min, Binning<T>& out,
+                   bool cull_tiles) {
   const std::size_t n = proj.count;
   out.width = width;
   out.height = height;
@@ -72,6 +73,10 @@ void bin_gaussians(const Projected<T>& proj, int width, int height, double alpha
   const int tiles_x = out.tiles_x, tiles_y = out.tiles_y;
   const std::size_t n_tiles = static_cast<std::size_t>(tiles_x) * tiles_y;
   grow(out.rect, n * 4);
+  grow(out.box, n * 4);
+  grow(out.reach, n);
+  grow(out.rect_offsets, n + 1);
+  grow(out.tile_count, n);
   grow(out.keys, n);
   grow(out.ids, n);
 
@@ -81,11 +86,14 @@ void bin_gaussians(const Projected<T>& proj, int width, int height, double alpha
   for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(n); ++i) {
     int* rect = &out.rect[i * 4];
     rect[0] = rect[1] = rect[2] = rect[3] = 0;
+    out.rect_offsets[i + 1] = 0;
     if (proj.radii[i] <= 0) continue;
     const T mx = proj.mean2d[i * 2], my = proj.mean2d[i * 2 + 1];
-    int r[4], box[4];
+    int r[4];
+    int* box = &out.box[i * 4];
     tile_rect(mx, my, proj.radii[i], tiles_x, tiles_y, r);
     if (!alpha_pixel_box(mx, my, &proj.conic[i * 3], proj.opacity[i], amin, box)) continue;
+    out.reach[i] = T(2) * hd_log(proj.opacity[i] / amin);
     // Tiles of the pixel box (pixel p lies in tile p / 16); empty ranges when the box is off-image.
     const int bx0 = box[0] < 0 ? 0 : box[0] / kTileSize;
     const int bx1 = box[1] < 0 ? 0 : box[1] / kTileSize + 1;
@@ -96,13 +104,33 @@ void bin_gaussians(const Projected<T>& proj, int width, int height, double alpha
     rect[2] = std::min(r[2], bx1);
     rect[3] = std::min(r[3], by1);
     if (rect[2] <= rect[0] || rect[3] <= rect[1]) rect[0] = rect[1] = rect[2] = rect[3] = 0;
+    out.rect_offsets[i + 1] = (rect[2] - rect[0]) * (rect[3] - rect[1]);
+  }
+  out.rect_offsets[0] = 0;
+  for (std::size_t i = 0; i < n; ++i) out.rect_offsets[i + 1] += out.rect_offsets[i];
+  grow(out.rect_tiles, static_cast<std::size_t>(out.rect_offsets[n]));
+
+  // The tiles of each rectangle that the tile loops may visit (raster_math.hpp, tile_reach_columns), in
+  // row-major order, at the start of the rectangle's slot of rect_tiles.
+#pragma omp parallel for schedule(static)
+  for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(n); ++i) {
+    const int* rect = &out.rect[i * 4];
+    int* tiles = &out.rect_tiles[out.rect_offsets[i]];
+    int count = 0;
+    if (out.rect_offsets[i + 1] > out.rect_offsets[i]) {
+      const TileReach<T> reach =
+          cull_tiles ? tile_reach_setup(proj.mean2d[i * 2], proj.mean2d[i * 2 + 1], &proj.conic[i * 3], out.reach[i],
+                                        &out.box[i * 4], height)
+                     : TileReach<T>{};
+      count = for_each_reached_tile(reach, rect, [&](int tx, int ty) { tiles[count++] = ty * tiles_x + tx; });
+    }
+    out.tile_count[i] = count;
   }
 
   // 2. Candidates in index order, then a stable sort by depth.
   std::size_t ranks = 0;
   for (std::size_t i = 0; i < n; ++i) {
-    const int* rect = &out.rect[i * 4];
-    if (rect[2] > rect[0]) {
+    if (out.tile_count[i] > 0) {
       out.keys[ranks] = depth_key(static_cast<float>(proj.depth[i]));
       out.ids[ranks] = static_cast<int>(i);
       ++ranks;
@@ -130,16 +158,14 @@ void bin_gaussians(const Projected<T>& proj, int width, int height, double alpha
     s.g = proj.color[i * 3 + 1];
     s.b = proj.color[i * 3 + 2];
     s.z = proj.depth[i];
-    int box[4] = {0, -1, 0, -1};
-    alpha_pixel_box(s.mx, s.my, &proj.conic[i * 3], s.opacity, amin, box);
+    const int* box = &out.box[i * 4];  // alpha_pixel_box's, set (as reach) for every candidate
     s.x0 = box[0];
     s.x1 = box[1];
     s.y0 = box[2];
     s.y1 = box[3];
-    s.reach = T(2) * hd_log(s.opacity / amin);
+    s.reach = out.reach[i];  // 2 ln(opacity / alpha_min)
     s.inv_qa = T(1) / s.qa;
-    const int* rect = &out.rect[i * 4];
-    out.rank_isect_offsets[r + 1] = (rect[2] - rect[0]) * (rect[3] - rect[1]);
+    out.rank_isect_offsets[r + 1] = out.tile_count[i];
   }
   out.rank_isect_offsets[0] = 0;
   for (std::size_t r = 0; r < ranks; ++r) out.rank_isect_offsets[r + 1] += out.rank_isect_offsets[r];
@@ -159,9 +185,9 @@ void bin_gaussians(const Projected<T>& proj, int width, int height, double alpha
     int* counts = &out.chunk_counts[static_cast<std::size_t>(c) * n_tiles];
     std::fill(counts, counts + n_tiles, 0);
     for (std::size_t r = chunk_begin(c); r < chunk_begin(c + 1); ++r) {
-      const int* rect = &out.rect[out.ids[r] * 4];
-      for (int ty = rect[1]; ty < rect[3]; ++ty)
-        for (int tx = rect[0]; tx < rect[2]; ++tx) ++counts[ty * tiles_x + tx];
+      const int i = out.ids[r];
+      const int* tiles = &out.rect_tiles[out.rect_offsets[i]];
+      for (int j = 0; j < out.tile_count[i]; ++j) ++counts[tiles[j]];
     }
   }
   int offset = 0;
@@ -179,19 +205,19 @@ void bin_gaussians(const Projected<T>& proj, int width, int height, double alpha
   for (int c = 0; c < chunks; ++c) {
     int* cursor = &out.chunk_counts[static_cast<std::size_t>(c) * n_tiles];
     for (std::size_t r = chunk_begin(c); r < chunk_begin(c + 1); ++r) {
-      const int* rect = &out.rect[out.ids[r] * 4];
+      const int i = out.ids[r];
+      const int* tiles = &out.rect_tiles[out.rect_offsets[i]];
       int k = out.rank_isect_offsets[r];
-      for (int ty = rect[1]; ty < rect[3]; ++ty)
-        for (int tx = rect[0]; tx < rect[2]; ++tx) {
-          const int pos = cursor[ty * tiles_x + tx]++;
-          out.isect_rank[pos] = static_cast<int>(r);
-          out.rank_isects[k++] = pos;
-        }
+      for (int j = 0; j < out.tile_count[i]; ++j) {
+        const int pos = cursor[tiles[j]]++;
+        out.isect_rank[pos] = static_cast<int>(r);
+        out.rank_isects[k++] = pos;
+      }
     }
   }
 }
 
-template void bin_gaussians<float>(const Projected<float>&, int, int, double, Binning<float>&);
-template void bin_gaussians<double>(const Projected<double>&, int, int, double, Binning<double>&);
+template void bin_gaussians<float>(const Projected<float>&, int, int, double, Binning<float>&, bool);
+template void bin_gaussians<double>(const Projected<double>&, int, int, double, Binning<double>&, bool);
 
 }  // namespace d2gs::render::cpu

@@ -97,6 +97,11 @@ struct Binning {
   std::vector<std::uint32_t> keys, keys_tmp;
   std::vector<int> ids, ids_tmp;  // candidate Gaussian ids (sorted by depth into ids)
   std::vector<int> rect;          // per Gaussian: tile range x0 y0 x1 y1 (exclusive ends) after culling
+  std::vector<int> box;           // per Gaussian with a rectangle: alpha_pixel_box (x0 x1 y0 y1, inclusive)
+  std::vector<T> reach;           // per Gaussian with a rectangle: 2 ln(opacity / alpha_min)
+  std::vector<int> rect_offsets;  // N + 1: prefix sums of the rectangles' areas (slots in rect_tiles)
+  std::vector<int> rect_tiles;    // per Gaussian, at rect_offsets[i]: its tile_count[i] kept tiles (ids)
+  std::vector<int> tile_count;    // N: tiles kept of the rectangle (tile_reach_columns) = its intersections
   std::vector<int> rank_gaussian;        // R: Gaussian id of depth rank r
   std::vector<Splat<T>> splats;          // R
   std::vector<int> rank_isect_offsets;   // R + 1

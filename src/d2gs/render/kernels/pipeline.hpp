@@ -148,6 +148,7 @@ public:
     c.n = n;
     c.tiles_x = out.tiles_x;
     c.tiles_y = out.tiles_y;
+    c.height = camera.height;
     c.alpha_min = static_cast<float>(options.alpha_min);
     c.mean2d = mean2d_.data();
     c.conic = conic_.data();
@@ -168,8 +169,7 @@ public:
     ranges_.resize(static_cast<std::size_t>(tiles) * 2);
     EmitKeysArgs e;
     e.n = n;
-    e.tiles_x = out.tiles_x;
-    e.rects = rects_.data();
+    e.tiles = c;
     e.offsets = offsets_.data();
     e.depth = depth_.data();
     e.keys = keys_.data();
