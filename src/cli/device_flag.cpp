@@ -14,9 +14,11 @@ void add_device_flag(CLI::App& cmd, std::string& word) {
 }
 
 render::DeviceChoice resolve_device_flag(const std::string& word) {
-  const render::DeviceChoice choice = render::choose_device(render::parse_device_request(word));
+  return render::choose_device(render::parse_device_request(word));
+}
+
+void log_device_choice(const render::DeviceChoice& choice) {
   if (!choice.reason.empty()) spdlog::info("--device auto: using the {}: {}", choice.description, choice.reason);
-  return choice;
 }
 
 }  // namespace d2gs::cli

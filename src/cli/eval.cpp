@@ -116,6 +116,7 @@ Run add_eval_command(CLI::App& app) {
     eo.lpips = lpips ? &*lpips : nullptr;
     eo.lpips_range = range;
     eo.lpips_skipped = "no LPIPS weights given (--lpips-weights FILE or D2GS_LPIPS_WEIGHTS)";
+    log_device_choice(backend);
     const EvalSummary summary = evaluate_views(model, scene, test, eo);
     const nlohmann::json j = write_results_json(run, summary, scene,
                                                 {.method = c.method, .iteration = it, .gaussians = model.size(),

@@ -91,6 +91,23 @@ TEST(Ssim, ReferenceIsBitIdentical) {
   }
 }
 
+// The gradient is added to what the buffer holds (the trainer's L1 gradient): until 2026-11-26 it was
+// written over it, and every training run lost its L1 gradient.
+TEST(Ssim, GradientIsAddedToTheBuffer) {
+  const int w = 16, h = 12, c = 3;
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  std::vector<float> a(static_cast<std::size_t>(w) * h * c), b(a.size()), zero(a.size(), 0.0f), held(a.size());
+  for (auto& v : a) v = u(rng);
+  for (auto& v : b) v = u(rng);
+  for (auto& v : held) v = u(rng) - 0.5f;
+  std::vector<float> sum = held;
+  Ssim<float> s;
+  s.evaluate(a.data(), b.data(), w, h, c, zero.data(), -0.2f);
+  s.evaluate(a.data(), b.data(), w, h, c, sum.data(), -0.2f);
+  for (std::size_t i = 0; i < a.size(); ++i) EXPECT_EQ(sum[i], held[i] + zero[i]) << i;
+}
+
 TEST(Ssim, IdenticalImagesGiveOneAndZeroGradient) {
   const int w = 20, h = 20, c = 1;
   std::vector<double> a(static_cast<std::size_t>(w) * h), g(a.size());

@@ -188,9 +188,10 @@ TEST(Methods, D2gsChecksItsCheckpointState) {
 // ---- regularisers (--regularisers): components stacked on any method ----
 
 TEST(Regularisers, RegistryAndNames) {
-  ASSERT_EQ(training_regularisers().size(), 2u);
+  ASSERT_EQ(training_regularisers().size(), 3u);
   EXPECT_STREQ(training_regularisers()[0].name, "opacity-noise");
   EXPECT_STREQ(training_regularisers()[1].name, "opacity-decay");
+  EXPECT_STREQ(training_regularisers()[2].name, "stereo-depth");
   TrainConfig c;
   c.method = "dropgaussian";
   c.regularisers = {"opacity-decay", "opacity-noise"};

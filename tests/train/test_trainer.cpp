@@ -145,6 +145,29 @@ TEST(Trainer, RegularisersTrainAndResumeBitIdentically) {
   EXPECT_LT(mean_opacity(a.model()), 0.85 * mean_opacity(c.model()));
 }
 
+// The loss's gradient is L1's plus SSIM's: with λ_dssim = 0 the L1 gradient alone must train. (Until
+// 2026-11-26 SSIM's backward wrote over the L1 gradient, so this run learned nothing.)
+TEST(Trainer, TheL1GradientTrainsWithoutSsim) {
+  const auto dir = test::scratch_dir();
+  auto cfg = fern_config(dir / "run", "3dgs", 30);
+  cfg.init = "random";
+  cfg.random_points = 2000;
+  cfg.lambda_dssim = 0.0f;
+  Trainer t(cfg);
+  const std::vector<float> before = t.model().sh_dc;
+  t.run();
+  EXPECT_NE(t.model().sh_dc, before) << "no gradient reached the colours";
+  std::ifstream log(dir / "run/train_log.jsonl");
+  std::string line;
+  std::vector<double> l1;
+  while (std::getline(log, line)) {
+    const auto j = nlohmann::json::parse(line);
+    if (j.contains("l1")) l1.push_back(j["l1"].get<double>());
+  }
+  ASSERT_GE(l1.size(), 3u);
+  EXPECT_LT(l1.back(), 0.9 * l1.front()) << "L1 " << l1.front() << " -> " << l1.back();
+}
+
 // --regularisers stereo-depth: the term is logged, resumes bit-identically (it keeps no state), and pulls the
 // training views' rendered disparity towards the stereo depth maps of the run's geometry.
 TEST(Trainer, StereoDepthPullsTheRenderTowardsTheStereoDepth) {

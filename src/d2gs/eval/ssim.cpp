@@ -227,7 +227,7 @@ T Ssim<T>::evaluate(const T* a, const Reference& ref, T* grad_a, T grad_scale) {
       blur(d_saa_.data(), s_aa_.data());
       blur(d_sab_.data(), s_ab_.data());
       for (std::size_t i = 0; i < n; ++i)
-        grad_a[i * channels + c] = mu_a_[i] + T(2) * a_[i] * s_aa_[i] + bp[i] * s_ab_[i];
+        grad_a[i * channels + c] += mu_a_[i] + T(2) * a_[i] * s_aa_[i] + bp[i] * s_ab_[i];
     }
   }
   return static_cast<T>(total * inv_count);

@@ -27,8 +27,9 @@ public:
   };
   Reference reference(const T* b, int width, int height, int channels);
 
-  // Mean SSIM of `a` against `b`. When `grad_a` is non-null it receives d(mean SSIM)/d a (same layout),
-  // scaled by `grad_scale` (e.g. −0.2 for the loss term 0.2·(1 − SSIM)).
+  // Mean SSIM of `a` against `b`. When `grad_a` is non-null, d(mean SSIM)/d a (same layout) scaled by
+  // `grad_scale` (e.g. −0.2 for the loss term 0.2·(1 − SSIM)) is ADDED to it, as every loss's gradient is
+  // (the trainer adds L1's first).
   T evaluate(const T* a, const T* b, int width, int height, int channels, T* grad_a = nullptr,
              T grad_scale = T(1));
   // The same against a precomputed reference(b, ...) (evaluate(a, b, ...) is this with reference(b, ...)).

@@ -197,8 +197,7 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
   // --device: `cuda` that cannot be had is an error before anything is read or written; `auto` says why it
   // took the CPU. Every stage below is the CPU backend's: choose_device returns the CPU until the CUDA
   // backend runs a whole step (render/device_choice.hpp).
-  s.device = render::choose_device(s.cfg.device);
-  if (!s.device.reason.empty()) spdlog::info("--device auto: using the {}: {}", s.device.description, s.device.reason);
+  s.device = render::choose_device(s.cfg.device);  // said in the log once the inputs are checked (below)
   const bool resuming = !resume_from.empty();
   std::error_code ec;
   if (fs::exists(s.cfg.model_dir, ec) && !fs::is_directory(s.cfg.model_dir, ec))
@@ -291,6 +290,7 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
   } else {
     write_point_cloud_ply(s.out() / "input.ply", init);
   }
+  if (!s.device.reason.empty()) spdlog::info("--device auto: using the {}: {}", s.device.description, s.device.reason);
   write_run_config(s.out(), s.cfg, s.scene, s.split, s.extent, s.oracle_init, s.device.device);
   write_cameras_json(s.out(), s.scene, s.split);
   s.log.open(s.out() / "train_log.jsonl", s.iteration > 0 ? std::ios::app : std::ios::trunc);
