@@ -33,6 +33,34 @@ TEST(Image, HeaderSizeOfRealPngAndJpeg) {
   EXPECT_EQ(room.height, decoded.height);
 }
 
+// Stray bytes between a JPEG's segments (fill 0xFF, a stuffed "FF 00", garbage) are skipped by libjpeg
+// with a warning and the image decodes. The header reader must find the same frame size as the decoder:
+// a hand-written marker walk read "FF 00" as a segment and returned a size from the wrong bytes (found by
+// fuzz_image; its input is in fuzz/corpus/fuzz_image/stray-ff00-before-dqt.jpg).
+TEST(Image, HeaderSizeSkipsStrayBytesBetweenJpegSegmentsAsTheDecoderDoes) {
+  const auto dir = test::scratch_dir();
+  const std::string jpeg = read_file(test::shared_data() / "llff_nex_reprocessed/room/images/img001.JPG");
+  // After SOI and the first segment (APP0 or APP1), insert stray bytes before the next marker.
+  ASSERT_EQ(static_cast<unsigned char>(jpeg[2]), 0xFF);
+  const std::size_t first_len = (static_cast<unsigned char>(jpeg[4]) << 8) | static_cast<unsigned char>(jpeg[5]);
+  const std::size_t next = 4 + first_len;
+  ASSERT_EQ(static_cast<unsigned char>(jpeg[next]), 0xFF);
+  const std::string stray("\xFF\xFF\xFF\x00\x00\x13\x37\xFF\x00\x00", 10);
+  const std::string damaged = jpeg.substr(0, next) + stray + jpeg.substr(next);
+  write_file_atomic(dir / "stray.jpg", damaged);
+  const Image decoded = read_image(dir / "stray.jpg");
+  const ImageSize header = read_image_size(dir / "stray.jpg");
+  EXPECT_EQ(header.width, decoded.width);
+  EXPECT_EQ(header.height, decoded.height);
+  EXPECT_EQ(decoded.width, 996);
+  // And the fuzzer's own input, which decodes (a 12 x 9 frame after the stray bytes).
+  const auto finding = test::source_dir() / "fuzz/corpus/fuzz_image/stray-ff00-before-dqt.jpg";
+  const Image image = read_image(finding);
+  const ImageSize size = read_image_size(finding);
+  EXPECT_EQ(size.width, image.width);
+  EXPECT_EQ(size.height, image.height);
+}
+
 TEST(Image, RgbOrderAndAreaResize) {
   const Image fern = read_image(test::shared_data() / "nerf_llff_data/fern/images_4/image000.png");
   const Image half = resize_area(fern, fern.width / 2, fern.height / 2);

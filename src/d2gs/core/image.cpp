@@ -124,6 +124,33 @@ std::string jpeg_problem(std::string_view bytes) {
   return {};
 }
 
+// The frame size from libjpeg's own header reader, which skips stray bytes and fill the way the decoder
+// does (a hand-written marker walk disagreed with it on damaged streams). Reads only up to the first
+// scan. Empty when the header is read, else libjpeg's complaint; only plain objects live across setjmp.
+std::string jpeg_header_size(const fs::path& path, ImageSize& size) {
+  std::FILE* file = std::fopen(path.c_str(), "rb");
+  if (file == nullptr) return "cannot open the file";
+  jpeg_decompress_struct info{};
+  JpegErrors errors{};
+  info.err = jpeg_std_error(&errors.mgr);
+  errors.mgr.error_exit = jpeg_on_error;
+  errors.mgr.emit_message = [](j_common_ptr, int) {};  // the decoder judges the data; only the size is read here
+  if (setjmp(errors.jump)) {
+    jpeg_destroy_decompress(&info);
+    std::fclose(file);
+    return errors.first_message.empty() ? std::string("undecodable JPEG header") : errors.first_message;
+  }
+  jpeg_create_decompress(&info);
+  jpeg_stdio_src(&info, file);
+  jpeg_read_header(&info, TRUE);
+  const JDIMENSION w = info.image_width, h = info.image_height;
+  jpeg_destroy_decompress(&info);
+  std::fclose(file);
+  if (w == 0 || h == 0 || w > INT32_MAX || h > INT32_MAX) return "zero or huge frame size";
+  size = {static_cast<int>(w), static_cast<int>(h)};
+  return {};
+}
+
 ImageReadObserver& image_read_observer() {
   static ImageReadObserver observer;
   return observer;
@@ -161,6 +188,7 @@ Image decode_image(std::string_view bytes, const fs::path& source) {
 ImageSize read_image_size(const fs::path& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) fail_file(path, "image not found");
+  ImageSize size{};
   unsigned char head[32] = {};
   in.read(reinterpret_cast<char*>(head), sizeof head);
   const auto got = in.gcount();
@@ -173,31 +201,9 @@ ImageSize read_image_size(const fs::path& path) {
     return {static_cast<int>(w), static_cast<int>(h)};
   }
   if (got >= 4 && head[0] == 0xFF && head[1] == 0xD8) {
-    // JPEG: walk the markers to the first start-of-frame.
-    in.clear();
-    in.seekg(2);
-    for (int guard = 0; guard < 1000 && in; ++guard) {
-      int b = in.get();
-      while (b != 0xFF && in) b = in.get();
-      while (b == 0xFF && in) b = in.get();
-      if (!in) break;
-      const int marker = b;
-      if (marker == 0xD8 || (marker >= 0xD0 && marker <= 0xD7) || marker == 0x01) continue;
-      unsigned char len_bytes[2];
-      if (!in.read(reinterpret_cast<char*>(len_bytes), 2)) break;
-      const int len = (len_bytes[0] << 8) | len_bytes[1];
-      if (len < 2) break;
-      const bool sof = marker >= 0xC0 && marker <= 0xCF && marker != 0xC4 && marker != 0xC8 && marker != 0xCC;
-      if (sof) {
-        unsigned char sofb[5];
-        if (!in.read(reinterpret_cast<char*>(sofb), 5)) break;
-        const int h = (sofb[1] << 8) | sofb[2], w = (sofb[3] << 8) | sofb[4];
-        if (w <= 0 || h <= 0) break;
-        return {w, h};
-      }
-      in.seekg(len - 2, std::ios::cur);
-    }
-    fail_file(path, "corrupt JPEG header");
+    const std::string problem = jpeg_header_size(path, size);
+    if (!problem.empty()) fail_file(path, "corrupt JPEG header ({})", problem);
+    return size;
   }
   const Image decoded = read_image(path);
   return {decoded.width, decoded.height};
