@@ -1,7 +1,8 @@
-// Adam and the L1 loss kernels through the CPU emulator (every build; CI runs them without a GPU).
+// Adam, the L1 loss and SSIM kernels through the CPU emulator (every build; CI runs them without a GPU).
 #include "d2gs/render/kernels/host_backend.hpp"
 #include "d2gs/train/kernels/optim.hpp"
 #include "d2gs/train/kernels/optim_pipeline.hpp"
+#include "d2gs/train/kernels/ssim_pipeline.hpp"
 
 namespace d2gs::train_kernels {
 
@@ -15,6 +16,18 @@ double emulated_l1_loss(const float* a, const float* b, std::size_t count, float
                         render::kernels::emulate::Schedule schedule) {
   render::kernels::emulate::HostBackend backend{schedule};
   return l1_loss(backend, a, b, count, grad, scale);
+}
+
+Ssim<float>::Reference emulated_ssim_reference(const float* b, int width, int height, int channels,
+                                               render::kernels::emulate::Schedule schedule) {
+  render::kernels::emulate::HostBackend backend{schedule};
+  return SsimPipeline(backend).reference(b, width, height, channels);
+}
+
+double emulated_ssim(const float* a, const Ssim<float>::Reference& reference, float* grad, float grad_scale,
+                     render::kernels::emulate::Schedule schedule) {
+  render::kernels::emulate::HostBackend backend{schedule};
+  return SsimPipeline(backend).evaluate(a, reference, grad, grad_scale);
 }
 
 }  // namespace d2gs::train_kernels

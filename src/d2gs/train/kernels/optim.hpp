@@ -1,9 +1,11 @@
 #pragma once
-// Adam (adam_kernels.hpp) and the L1 loss with its gradient (l1_kernels.hpp) as kernels: through the CPU
-// emulator (render/kernels/emulate.hpp) in every build, and on the GPU (train/cuda/optim.cu) when there
-// is one. Same arguments and results as Adam::step and l1_loss; host arrays in and out.
+// Adam (adam_kernels.hpp), the L1 loss with its gradient (l1_kernels.hpp) and SSIM with its gradient
+// (ssim_kernels.hpp) as kernels: through the CPU emulator (render/kernels/emulate.hpp) in every build, and
+// on the GPU (train/cuda/optim.cu) when there is one. Same arguments and results as Adam::step, l1_loss
+// and Ssim<float>; host arrays in and out.
 #include <cstddef>
 
+#include "d2gs/eval/ssim.hpp"
 #include "d2gs/render/kernels/emulate.hpp"
 #include "d2gs/train/adam.hpp"
 
@@ -16,9 +18,21 @@ void emulated_adam_step(Gaussians& model, const Gaussians& grads, AdamState& sta
 double emulated_l1_loss(const float* a, const float* b, std::size_t count, float* grad = nullptr, float scale = 1.0f,
                         render::kernels::emulate::Schedule schedule = render::kernels::emulate::Schedule::Forward);
 
+// Ssim<float>::reference(b, ...) and Ssim<float>::evaluate(a, reference, grad, grad_scale); evaluate
+// returns the mean SSIM in double (the CPU returns it rounded to float).
+Ssim<float>::Reference emulated_ssim_reference(
+    const float* b, int width, int height, int channels,
+    render::kernels::emulate::Schedule schedule = render::kernels::emulate::Schedule::Forward);
+double emulated_ssim(const float* a, const Ssim<float>::Reference& reference, float* grad = nullptr,
+                     float grad_scale = 1.0f,
+                     render::kernels::emulate::Schedule schedule = render::kernels::emulate::Schedule::Forward);
+
 // The same on the GPU; d2gs::Error without one.
 void device_adam_step(Gaussians& model, const Gaussians& grads, AdamState& state, const LearningRates& lr,
                       float means_lr, bool skip_opacity = false);
 double device_l1_loss(const float* a, const float* b, std::size_t count, float* grad = nullptr, float scale = 1.0f);
+Ssim<float>::Reference device_ssim_reference(const float* b, int width, int height, int channels);
+double device_ssim(const float* a, const Ssim<float>::Reference& reference, float* grad = nullptr,
+                   float grad_scale = 1.0f);
 
 }  // namespace d2gs::train_kernels
