@@ -1,7 +1,8 @@
-// Adam, the L1 loss and SSIM kernels through the CPU emulator (every build; CI runs them without a GPU).
+// Adam, the L1 loss, SSIM, the dropout masks and the densification statistic kernels through the CPU emulator (every build; CI runs them without a GPU).
 #include "d2gs/render/kernels/host_backend.hpp"
 #include "d2gs/train/kernels/optim.hpp"
 #include "d2gs/train/kernels/optim_pipeline.hpp"
+#include "d2gs/train/kernels/per_gaussian_pipeline.hpp"
 #include "d2gs/train/kernels/ssim_pipeline.hpp"
 
 namespace d2gs::train_kernels {
@@ -28,6 +29,24 @@ double emulated_ssim(const float* a, const Ssim<float>::Reference& reference, fl
                      render::kernels::emulate::Schedule schedule) {
   render::kernels::emulate::HostBackend backend{schedule};
   return SsimPipeline(backend).evaluate(a, reference, grad, grad_scale);
+}
+
+void emulated_dropgaussian_mask(std::size_t n, double rate, Rng& rng, std::vector<float>& multiplier,
+                                render::kernels::emulate::Schedule schedule) {
+  render::kernels::emulate::HostBackend backend{schedule};
+  dropgaussian_mask(backend, n, rate, rng, multiplier);
+}
+
+void emulated_bernoulli_mask(const std::vector<float>& probabilities, Rng& rng, std::vector<float>& multiplier,
+                             bool compensate, render::kernels::emulate::Schedule schedule) {
+  render::kernels::emulate::HostBackend backend{schedule};
+  bernoulli_mask(backend, probabilities, rng, multiplier, compensate);
+}
+
+void emulated_add_gradient_stats(GradientStats& stats, const std::vector<float>& grad_mean2d_ndc,
+                                 const std::vector<int>& radii, render::kernels::emulate::Schedule schedule) {
+  render::kernels::emulate::HostBackend backend{schedule};
+  add_gradient_stats(backend, stats, grad_mean2d_ndc, radii);
 }
 
 }  // namespace d2gs::train_kernels
