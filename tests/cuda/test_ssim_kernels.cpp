@@ -21,6 +21,7 @@
 #include "d2gs/eval/ssim.hpp"
 #include "d2gs/render/cuda/device.hpp"
 #include "d2gs/train/kernels/optim.hpp"
+#include "d2gs/train/losses.hpp"
 #include "test_paths.hpp"
 
 namespace d2gs::test {
@@ -97,18 +98,25 @@ void expect_reference_equal(const Pair& p, Reference kernel_reference, const std
 }
 
 // Value and gradient of kernel_ssim against Ssim<float>::evaluate, with the CPU's reference statistics.
+// Both add their gradient to a buffer that already holds the L1 gradient, as in the training step (the
+// CPU's l1_loss first): the sums must agree, so a kernel that wrote over the buffer would fail (the L1
+// gradient, of order 1/count, is far above the tolerance, 2e-4/count).
 template <class Evaluate>
 void expect_ssim_equal(const Pair& p, Evaluate kernel_ssim, const std::string& what) {
   Ssim<float> cpu;
   const auto ref = cpu.reference(p.b.data(), p.width, p.height, p.channels);
   const float grad_scale = -0.2f;  // the trainer's: the loss term 0.2·(1 − SSIM)
-  std::vector<float> g_cpu(p.a.size(), 7.0f), g_kernel(p.a.size(), -7.0f);  // overwritten, not added to
+  std::vector<float> l1_grad(p.a.size(), 0.0f);
+  l1_loss(p.a.data(), p.b.data(), p.a.size(), l1_grad.data(), 1.0f);
+  std::vector<float> g_cpu = l1_grad, g_kernel = l1_grad;
   const float v_cpu = cpu.evaluate(p.a.data(), ref, g_cpu.data(), grad_scale);
   const double v_kernel = kernel_ssim(p.a.data(), ref, g_kernel.data(), grad_scale);
   EXPECT_NEAR(v_kernel, v_cpu, 0x1p-24) << what;
   EXPECT_NEAR(kernel_ssim(p.a.data(), ref, nullptr, 1.0f), v_kernel, 1e-12) << what << " (value only)";
   const double count = static_cast<double>(p.a.size());
-  expect_equal(g_kernel, g_cpu, static_cast<float>(0.2 * 20.0 / count), what + " gradient");
+  expect_equal(g_kernel, g_cpu, static_cast<float>(0.2 * 20.0 / count), what + " gradient (added to L1's)");
+  // The buffer held L1's gradient: no test of the sum would notice an overwrite if it had been zero.
+  ASSERT_NE(std::count(l1_grad.begin(), l1_grad.end(), 0.0f), static_cast<std::ptrdiff_t>(l1_grad.size())) << what;
 }
 
 TEST(EmulatedKernels, SsimReferenceEqualsTheCpu) {

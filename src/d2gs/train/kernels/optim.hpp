@@ -24,7 +24,8 @@ double emulated_l1_loss(const float* a, const float* b, std::size_t count, float
                         render::kernels::emulate::Schedule schedule = render::kernels::emulate::Schedule::Forward);
 
 // Ssim<float>::reference(b, ...) and Ssim<float>::evaluate(a, reference, grad, grad_scale); evaluate
-// returns the mean SSIM in double (the CPU returns it rounded to float).
+// returns the mean SSIM in double (the CPU returns it rounded to float) and, as the CPU, adds its gradient
+// to what grad holds (the L1 gradient in the training step), as emulated_l1_loss adds its own.
 Ssim<float>::Reference emulated_ssim_reference(
     const float* b, int width, int height, int channels,
     render::kernels::emulate::Schedule schedule = render::kernels::emulate::Schedule::Forward);

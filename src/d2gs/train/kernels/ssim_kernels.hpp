@@ -19,8 +19,8 @@
 //    (double: warp shuffles, then the warps' sums in shared memory) into partials[block], no atomics.
 //  - SumPartialsKernel: one block adds the partials in a fixed order (thread t: partials t, t + 256, …;
 //    then the same block reduction), so the mean is the same on every run and on the GPU.
-//  - SsimGradKernel: one thread per value: grad = ssim_input_gradient of the blurred derivatives (written,
-//    not added: the CPU's Ssim::evaluate writes its gradient too).
+//  - SsimGradKernel: one thread per value: grad += ssim_input_gradient of the blurred derivatives (added
+//    to what the buffer holds, the L1 gradient in the training step, as the CPU's Ssim::evaluate adds).
 #include <math.h>
 
 #include "d2gs/eval/ssim_math.hpp"
@@ -204,13 +204,13 @@ struct SsimGradArgs {
   const float* blurred_d_mu = nullptr;   // C planes each
   const float* blurred_d_saa = nullptr;
   const float* blurred_d_sab = nullptr;
-  float* grad = nullptr;  // H x W x C
+  float* grad = nullptr;  // H x W x C: += SSIM's gradient
 };
 
 D2GS_HD void ssim_grad_thread(int j, const SsimGradArgs& a) {
   const int p = j / a.channels, c = j % a.channels;
   const long long at = static_cast<long long>(c) * a.pixels + p;
-  a.grad[j] = ssim_input_gradient(a.blurred_d_mu[at], a.a[j], a.blurred_d_saa[at], a.b[at], a.blurred_d_sab[at]);
+  a.grad[j] += ssim_input_gradient(a.blurred_d_mu[at], a.a[j], a.blurred_d_saa[at], a.b[at], a.blurred_d_sab[at]);
 }
 using SsimGradKernel = render::kernels::PerItemKernel<SsimGradArgs, ssim_grad_thread>;
 

@@ -44,7 +44,8 @@ public:
   }
 
   // Ssim<float>::evaluate(a, ref, grad, grad_scale): the mean SSIM (in double, before the CPU's rounding of
-  // it to float); grad (if non-null) receives grad_scale · d(mean SSIM)/da.
+  // it to float); grad_scale · d(mean SSIM)/da is ADDED to grad (if non-null), which holds the other loss
+  // terms' gradients (the L1 gradient in the training step), as the CPU's Ssim::evaluate adds.
   double evaluate(const float* a, const Ssim<float>::Reference& ref, float* grad, float grad_scale) {
     const int width = ref.width, height = ref.height, channels = ref.channels;
     check_size(width, height, channels);
@@ -99,7 +100,7 @@ public:
 
     if (grad) {
       blur(planes_, 3 * n, width, height, blurred_);  // blurred_ (mu_a, s_aa, s_ab) is no longer needed
-      grad_.resize(values);
+      backend_.upload(grad_, grad, values);  // the gradient so far, which the kernel adds to
       SsimGradArgs g;
       g.n = n;
       g.pixels = width * height;
