@@ -11,20 +11,6 @@
 namespace d2gs {
 namespace {
 
-template <typename T>
-std::array<T, kSsimWindow> gaussian_window() {
-  std::array<double, kSsimWindow> g{};
-  double sum = 0;
-  for (int i = 0; i < kSsimWindow; ++i) {
-    const double x = i - kSsimWindow / 2;
-    g[i] = std::exp(-(x * x) / (2.0 * kSsimSigma * kSsimSigma));
-    sum += g[i];
-  }
-  std::array<T, kSsimWindow> out{};
-  for (int i = 0; i < kSsimWindow; ++i) out[i] = static_cast<T>(g[i] / sum);
-  return out;
-}
-
 // Blur of one row: dst[x] = Σ_k w[k]·src[x + k − r] over the taps inside the row, summed in k order
 // starting from 0 — the operations of the former 11 axpy passes per row, so results are bit-identical
 // (with the same contraction into fused multiply-adds). The interior is one pass with the 11 taps in
@@ -96,22 +82,32 @@ void ssim_map_row(const T* __restrict mu_a, const T* __restrict mu_b, const T* _
                   const T* __restrict s_bb, const T* __restrict s_ab, int width, T C1, T C2, T g, T* __restrict map,
                   T* __restrict d_mu, T* __restrict d_saa, T* __restrict d_sab) {
   for (int x = 0; x < width; ++x) {
-    const T ma = mu_a[x], mb = mu_b[x];
-    const T var_a = s_aa[x] - ma * ma, var_b = s_bb[x] - mb * mb, cov = s_ab[x] - ma * mb;
-    const T A1 = T(2) * ma * mb + C1, A2 = T(2) * cov + C2;
-    const T B1 = ma * ma + mb * mb + C1, B2 = var_a + var_b + C2;
-    const T inv_b = T(1) / (B1 * B2);
-    const T s = A1 * A2 * inv_b;
-    map[x] = s;
-    if constexpr (Grad) {
-      d_mu[x] = g * ((T(2) * mb * A2 - T(2) * mb * A1) * inv_b - s * (T(2) * ma / B1 - T(2) * ma / B2));
-      d_saa[x] = g * (-s / B2);
-      d_sab[x] = g * (T(2) * A1 * inv_b);
-    }
+    if constexpr (Grad)
+      map[x] = ssim_pixel<T, true>(mu_a[x], mu_b[x], s_aa[x], s_bb[x], s_ab[x], C1, C2, g, &d_mu[x], &d_saa[x],
+                                   &d_sab[x]);
+    else
+      map[x] = ssim_pixel<T, false>(mu_a[x], mu_b[x], s_aa[x], s_bb[x], s_ab[x], C1, C2, g, nullptr, nullptr, nullptr);
   }
 }
 
 }  // namespace
+
+template <typename T>
+std::array<T, kSsimWindow> ssim_window() {
+  std::array<double, kSsimWindow> g{};
+  double sum = 0;
+  for (int i = 0; i < kSsimWindow; ++i) {
+    const double x = i - kSsimWindow / 2;
+    g[i] = std::exp(-(x * x) / (2.0 * kSsimSigma * kSsimSigma));
+    sum += g[i];
+  }
+  std::array<T, kSsimWindow> out{};
+  for (int i = 0; i < kSsimWindow; ++i) out[i] = static_cast<T>(g[i] / sum);
+  return out;
+}
+
+template std::array<float, kSsimWindow> ssim_window<float>();
+template std::array<double, kSsimWindow> ssim_window<double>();
 
 template <typename T>
 void Ssim<T>::resize(int width, int height) {
@@ -126,7 +122,7 @@ void Ssim<T>::resize(int width, int height) {
 // Zero-padded "same" separable filtering of one plane: horizontal pass into tmp_, vertical into out.
 template <typename T>
 void Ssim<T>::blur(const T* in, T* out) {
-  static const auto w = gaussian_window<T>();
+  static const auto w = ssim_window<T>();
   constexpr int r = kSsimWindow / 2;
   const int W = width_, H = height_;
   T* tmp = tmp_.data();
@@ -222,12 +218,12 @@ T Ssim<T>::evaluate(const T* a, const Reference& ref, T* grad_a, T grad_scale) {
     for (int y = 0; y < height; ++y) total += row_sums[y];
 
     if (grad_a) {
-      // grad_a = G*(dS/dmu_a) + 2a·G*(dS/d<a²>) + b·G*(dS/d<ab>)   (G self-adjoint)
+      // grad_a += G*(dS/dmu_a) + 2a·G*(dS/d<a²>) + b·G*(dS/d<ab>)   (G self-adjoint)
       blur(d_mu_.data(), mu_a_.data());
       blur(d_saa_.data(), s_aa_.data());
       blur(d_sab_.data(), s_ab_.data());
       for (std::size_t i = 0; i < n; ++i)
-        grad_a[i * channels + c] += mu_a_[i] + T(2) * a_[i] * s_aa_[i] + bp[i] * s_ab_[i];
+        grad_a[i * channels + c] += ssim_input_gradient(mu_a_[i], a_[i], s_aa_[i], bp[i], s_ab_[i]);
     }
   }
   return static_cast<T>(total * inv_count);

@@ -5,14 +5,16 @@
 //
 // Images are interleaved H×W×C (as d2gs::Image). The window is separable, so every local mean is two
 // 1-D passes; the adjoint of a zero-padded "same" filter with a symmetric kernel is the same filter.
+#include <array>
 #include <vector>
+
+#include "d2gs/eval/ssim_math.hpp"  // kSsimWindow, kSsimSigma, kSsimC1, kSsimC2 and the per-pixel arithmetic
 
 namespace d2gs {
 
-inline constexpr int kSsimWindow = 11;
-inline constexpr double kSsimSigma = 1.5;
-inline constexpr double kSsimC1 = 0.01 * 0.01;
-inline constexpr double kSsimC2 = 0.03 * 0.03;
+// The normalised 1-D window: exp(−x²/2σ²) / Σ, x = −5 … 5, in double, then rounded to T.
+template <typename T>
+std::array<T, kSsimWindow> ssim_window();
 
 // Reusable buffers for SSIM on images of one size (no allocation after the first call).
 template <typename T>
@@ -46,6 +48,8 @@ private:
 // Convenience: mean SSIM of two images (float inputs, double arithmetic).
 double ssim(const float* a, const float* b, int width, int height, int channels);
 
+extern template std::array<float, kSsimWindow> ssim_window<float>();
+extern template std::array<double, kSsimWindow> ssim_window<double>();
 extern template class Ssim<float>;
 extern template class Ssim<double>;
 

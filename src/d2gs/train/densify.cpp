@@ -5,6 +5,7 @@
 
 #include "d2gs/core/error.hpp"
 #include "d2gs/model/rows.hpp"
+#include "d2gs/train/densify_math.hpp"
 #include "d2gs/render/activations.hpp"
 
 namespace d2gs {
@@ -59,11 +60,8 @@ void GradientStats::add(const std::vector<float>& grad, const std::vector<int>& 
   const std::size_t n = sum_.size();
   if (grad.size() != 2 * n || radii.size() != n)
     fail("gradient statistics: {} gradients / {} radii for {} Gaussians", grad.size() / 2, radii.size(), n);
-  for (std::size_t i = 0; i < n; ++i) {
-    if (radii[i] <= 0) continue;
-    sum_[i] += std::sqrt(grad[2 * i] * grad[2 * i] + grad[2 * i + 1] * grad[2 * i + 1]);
-    count_[i] += 1.0f;
-  }
+  for (std::size_t i = 0; i < n; ++i)
+    add_gradient_stat(static_cast<int>(i), grad.data(), radii.data(), sum_.data(), count_.data());
 }
 
 std::vector<float> GradientStats::mean() const {

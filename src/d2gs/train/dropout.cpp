@@ -5,6 +5,7 @@
 
 #include "d2gs/core/error.hpp"
 #include "d2gs/geometry/knn.hpp"
+#include "d2gs/train/dropout_math.hpp"
 
 namespace d2gs {
 
@@ -17,7 +18,7 @@ void dropgaussian_mask(std::size_t n, double rate, Rng& rng, std::vector<float>&
   if (!(rate >= 0.0 && rate < 1.0)) fail("DropGaussian: rate {} outside [0, 1)", rate);
   multiplier.resize(n);
   const float keep_scale = static_cast<float>(1.0 / (1.0 - rate));
-  for (std::size_t i = 0; i < n; ++i) multiplier[i] = rng.uniform() < rate ? 0.0f : keep_scale;
+  for (std::size_t i = 0; i < n; ++i) multiplier[i] = dropgaussian_multiplier(rng.uniform(), rate, keep_scale);
 }
 
 double dd_drop_rate(const DdDropOptions& o, int iteration) {
@@ -95,9 +96,7 @@ void bernoulli_mask(const std::vector<float>& probabilities, Rng& rng, std::vect
                     bool compensate) {
   multiplier.resize(probabilities.size());
   for (std::size_t i = 0; i < probabilities.size(); ++i) {
-    const float p = probabilities[i];
-    // u ∈ [0, 1): p = 1 always drops, so 1 − p > 0 wherever a Gaussian is kept.
-    multiplier[i] = rng.uniform() < p ? 0.0f : compensate ? 1.0f / (1.0f - p) : 1.0f;
+    multiplier[i] = bernoulli_multiplier(rng.uniform(), probabilities[i], compensate);
   }
 }
 

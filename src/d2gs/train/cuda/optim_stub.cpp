@@ -1,4 +1,4 @@
-// Built when the CUDA backend is off: the GPU versions of the Adam and L1 kernels report that there is no GPU.
+// Built when the CUDA backend is off: the GPU versions of the Adam, L1, SSIM, dropout and densification kernels report that there is no GPU.
 #include "d2gs/core/error.hpp"
 #include "d2gs/render/cuda/device.hpp"
 #include "d2gs/train/kernels/optim.hpp"
@@ -9,6 +9,23 @@ void device_adam_step(Gaussians&, const Gaussians&, AdamState&, const LearningRa
   fail("CUDA: {}", cuda::describe_device());
 }
 double device_l1_loss(const float*, const float*, std::size_t, float*, float) {
+  fail("CUDA: {}", cuda::describe_device());
+}
+
+Ssim<float>::Reference device_ssim_reference(const float*, int, int, int) {
+  fail("CUDA: {}", cuda::describe_device());
+}
+double device_ssim(const float*, const Ssim<float>::Reference&, float*, float) {
+  fail("CUDA: {}", cuda::describe_device());
+}
+
+void device_dropgaussian_mask(std::size_t, double, Rng&, std::vector<float>&) {
+  fail("CUDA: {}", cuda::describe_device());
+}
+void device_bernoulli_mask(const std::vector<float>&, Rng&, std::vector<float>&, bool) {
+  fail("CUDA: {}", cuda::describe_device());
+}
+void device_add_gradient_stats(GradientStats&, const std::vector<float>&, const std::vector<int>&) {
   fail("CUDA: {}", cuda::describe_device());
 }
 

@@ -1,7 +1,9 @@
-// Adam and the L1 loss kernels through the CPU emulator (every build; CI runs them without a GPU).
+// Adam, the L1 loss, SSIM, the dropout masks and the densification statistic kernels through the CPU emulator (every build; CI runs them without a GPU).
 #include "d2gs/render/kernels/host_backend.hpp"
 #include "d2gs/train/kernels/optim.hpp"
 #include "d2gs/train/kernels/optim_pipeline.hpp"
+#include "d2gs/train/kernels/per_gaussian_pipeline.hpp"
+#include "d2gs/train/kernels/ssim_pipeline.hpp"
 
 namespace d2gs::train_kernels {
 
@@ -15,6 +17,36 @@ double emulated_l1_loss(const float* a, const float* b, std::size_t count, float
                         render::kernels::emulate::Schedule schedule) {
   render::kernels::emulate::HostBackend backend{schedule};
   return l1_loss(backend, a, b, count, grad, scale);
+}
+
+Ssim<float>::Reference emulated_ssim_reference(const float* b, int width, int height, int channels,
+                                               render::kernels::emulate::Schedule schedule) {
+  render::kernels::emulate::HostBackend backend{schedule};
+  return SsimPipeline(backend).reference(b, width, height, channels);
+}
+
+double emulated_ssim(const float* a, const Ssim<float>::Reference& reference, float* grad, float grad_scale,
+                     render::kernels::emulate::Schedule schedule) {
+  render::kernels::emulate::HostBackend backend{schedule};
+  return SsimPipeline(backend).evaluate(a, reference, grad, grad_scale);
+}
+
+void emulated_dropgaussian_mask(std::size_t n, double rate, Rng& rng, std::vector<float>& multiplier,
+                                render::kernels::emulate::Schedule schedule) {
+  render::kernels::emulate::HostBackend backend{schedule};
+  dropgaussian_mask(backend, n, rate, rng, multiplier);
+}
+
+void emulated_bernoulli_mask(const std::vector<float>& probabilities, Rng& rng, std::vector<float>& multiplier,
+                             bool compensate, render::kernels::emulate::Schedule schedule) {
+  render::kernels::emulate::HostBackend backend{schedule};
+  bernoulli_mask(backend, probabilities, rng, multiplier, compensate);
+}
+
+void emulated_add_gradient_stats(GradientStats& stats, const std::vector<float>& grad_mean2d_ndc,
+                                 const std::vector<int>& radii, render::kernels::emulate::Schedule schedule) {
+  render::kernels::emulate::HostBackend backend{schedule};
+  add_gradient_stats(backend, stats, grad_mean2d_ndc, radii);
 }
 
 }  // namespace d2gs::train_kernels

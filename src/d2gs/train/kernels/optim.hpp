@@ -1,11 +1,18 @@
 #pragma once
-// Adam (adam_kernels.hpp) and the L1 loss with its gradient (l1_kernels.hpp) as kernels: through the CPU
-// emulator (render/kernels/emulate.hpp) in every build, and on the GPU (train/cuda/optim.cu) when there
-// is one. Same arguments and results as Adam::step and l1_loss; host arrays in and out.
+// The training step's kernels outside the rasterizer: Adam (adam_kernels.hpp), the L1 loss with its
+// gradient (l1_kernels.hpp), SSIM with its gradient (ssim_kernels.hpp), the dropout masks
+// (dropout_kernels.hpp) and the densification statistic (densify_kernels.hpp): through the CPU emulator
+// (render/kernels/emulate.hpp) in every build, and on the GPU (train/cuda/optim.cu) when there is one.
+// Same arguments and results as Adam::step, l1_loss, Ssim<float>, dropgaussian_mask, bernoulli_mask and
+// GradientStats::add; host arrays in and out.
 #include <cstddef>
+#include <vector>
 
+#include "d2gs/core/random.hpp"
+#include "d2gs/eval/ssim.hpp"
 #include "d2gs/render/kernels/emulate.hpp"
 #include "d2gs/train/adam.hpp"
+#include "d2gs/train/densify.hpp"
 
 namespace d2gs::train_kernels {
 
@@ -16,9 +23,37 @@ void emulated_adam_step(Gaussians& model, const Gaussians& grads, AdamState& sta
 double emulated_l1_loss(const float* a, const float* b, std::size_t count, float* grad = nullptr, float scale = 1.0f,
                         render::kernels::emulate::Schedule schedule = render::kernels::emulate::Schedule::Forward);
 
+// Ssim<float>::reference(b, ...) and Ssim<float>::evaluate(a, reference, grad, grad_scale); evaluate
+// returns the mean SSIM in double (the CPU returns it rounded to float) and, as the CPU, adds its gradient
+// to what grad holds (the L1 gradient in the training step), as emulated_l1_loss adds its own.
+Ssim<float>::Reference emulated_ssim_reference(
+    const float* b, int width, int height, int channels,
+    render::kernels::emulate::Schedule schedule = render::kernels::emulate::Schedule::Forward);
+double emulated_ssim(const float* a, const Ssim<float>::Reference& reference, float* grad = nullptr,
+                     float grad_scale = 1.0f,
+                     render::kernels::emulate::Schedule schedule = render::kernels::emulate::Schedule::Forward);
+// dropgaussian_mask and bernoulli_mask: the same draws of rng (left n draws on, as the CPU leaves it).
+void emulated_dropgaussian_mask(std::size_t n, double rate, Rng& rng, std::vector<float>& multiplier,
+                                render::kernels::emulate::Schedule schedule = render::kernels::emulate::Schedule::Forward);
+void emulated_bernoulli_mask(const std::vector<float>& probabilities, Rng& rng, std::vector<float>& multiplier,
+                             bool compensate = false,
+                             render::kernels::emulate::Schedule schedule = render::kernels::emulate::Schedule::Forward);
+// stats.add(grad_mean2d_ndc, radii).
+void emulated_add_gradient_stats(GradientStats& stats, const std::vector<float>& grad_mean2d_ndc,
+                                 const std::vector<int>& radii,
+                                 render::kernels::emulate::Schedule schedule = render::kernels::emulate::Schedule::Forward);
+
 // The same on the GPU; d2gs::Error without one.
 void device_adam_step(Gaussians& model, const Gaussians& grads, AdamState& state, const LearningRates& lr,
                       float means_lr, bool skip_opacity = false);
 double device_l1_loss(const float* a, const float* b, std::size_t count, float* grad = nullptr, float scale = 1.0f);
+Ssim<float>::Reference device_ssim_reference(const float* b, int width, int height, int channels);
+double device_ssim(const float* a, const Ssim<float>::Reference& reference, float* grad = nullptr,
+                   float grad_scale = 1.0f);
+void device_dropgaussian_mask(std::size_t n, double rate, Rng& rng, std::vector<float>& multiplier);
+void device_bernoulli_mask(const std::vector<float>& probabilities, Rng& rng, std::vector<float>& multiplier,
+                           bool compensate = false);
+void device_add_gradient_stats(GradientStats& stats, const std::vector<float>& grad_mean2d_ndc,
+                               const std::vector<int>& radii);
 
 }  // namespace d2gs::train_kernels
