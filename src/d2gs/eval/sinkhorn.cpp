@@ -262,37 +262,6 @@ D2GS_ALWAYS_INLINE void kernel_row_body(const T* c, const double* psi, double ph
   }
 }
 
-// The exact row update and its kernel row in one exp pass: with x_j = psi_j − c_j·inv_eps and M = max_j x_j,
-// returns φ = log a − M − log Σ_j e^(x_j − M) (the log-domain update) and writes out_j = e^(x_j − M) · a / Σ, i.e.
-// exp(φ + psi_j − c_j·inv_eps); 0 where that is below e^−87 (no subnormals) or x_j − M < −86.
-template <class T>
-D2GS_ALWAYS_INLINE double kernel_row_exact_body(const T* c, const double* psi, double log_a, double inv_eps,
-                                                std::size_t count, float* out) {
-  const double m = max_arg(c, psi, inv_eps, count);
-  v8d acc{};
-  std::size_t j = 0;
-  for (; j + kLanes <= count; j += kLanes) {
-    const v8f x = __builtin_convertvector(load8(psi + j) - load8(c + j) * inv_eps - m, v8f);
-    const v8f e = exp8(x);
-    acc += __builtin_convertvector(e, v8d);
-    const v8f r = x < -86.0f ? v8f{} : e;
-    std::memcpy(out + j, &r, sizeof r);
-  }
-  double sum = hsum(acc);
-  for (; j < count; ++j) {
-    const float x = static_cast<float>(psi[j] - static_cast<double>(c[j]) * inv_eps - m);
-    const float e = exp_core(x);
-    sum += static_cast<double>(e);
-    out[j] = x < -86.0f ? 0.0f : e;
-  }
-  const double phi = log_a - m - std::log(sum);
-  const double scale = std::exp(phi + m);  // a / Σ
-  const float scale_f = static_cast<float>(scale);
-  const float limit = static_cast<float>(std::exp(-87.0) / scale);
-  for (j = 0; j < count; ++j) out[j] = out[j] < limit ? 0.0f : out[j] * scale_f;
-  return phi;
-}
-
 // 4-lane vectors for the kernel products: GCC keeps 8-lane double accumulators in memory on AVX2, so these loops
 // use explicit 4-lane ones (one AVX register), with a fixed summation order.
 typedef double v4d __attribute__((vector_size(32)));
@@ -306,6 +275,57 @@ D2GS_ALWAYS_INLINE v4d load4(const double* p) {
   v4d v;
   std::memcpy(&v, p, sizeof v);
   return v;
+}
+
+// The exact row update and its kernel row in one exp pass: with x_j = psi_j − c_j·inv_eps and M = max_j x_j,
+// returns φ = log a − M − log Σ_j e^(x_j − M) (the log-domain update) and writes out_j = e^(x_j − M) · a / Σ, i.e.
+// exp(φ + psi_j − c_j·inv_eps); 0 where that is below e^−87 (no subnormals) or x_j − M < −86. Explicit 4-lane
+// double / 8-lane float vectors (one AVX register each); the sum's order is fixed.
+template <class T>
+D2GS_ALWAYS_INLINE double kernel_row_exact_body(const T* c, const double* psi, double log_a, double inv_eps,
+                                                std::size_t count, float* out) {
+  constexpr double kNegInf = -std::numeric_limits<double>::infinity();
+  v4d m0 = v4d{} + kNegInf, m1 = m0;
+  std::size_t j = 0;
+  for (; j + 8 <= count; j += 8) {
+    const v4d x0 = load4(psi + j) - load4(c + j) * inv_eps, x1 = load4(psi + j + 4) - load4(c + j + 4) * inv_eps;
+    m0 = x0 > m0 ? x0 : m0;
+    m1 = x1 > m1 ? x1 : m1;
+  }
+  double m = kNegInf;
+  for (int k = 0; k < 4; ++k) m = std::max(m, std::max(m0[k], m1[k]));
+  for (; j < count; ++j) m = std::max(m, psi[j] - static_cast<double>(c[j]) * inv_eps);
+  v4d s0{}, s1{};
+  for (j = 0; j + 8 <= count; j += 8) {
+    const v4f x0 = __builtin_convertvector(load4(psi + j) - load4(c + j) * inv_eps - m, v4f);
+    const v4f x1 = __builtin_convertvector(load4(psi + j + 4) - load4(c + j + 4) * inv_eps - m, v4f);
+    const v8f x = __builtin_shufflevector(x0, x1, 0, 1, 2, 3, 4, 5, 6, 7);
+    const v8f e = exp8(x);
+    s0 += __builtin_convertvector(__builtin_shufflevector(e, e, 0, 1, 2, 3), v4d);
+    s1 += __builtin_convertvector(__builtin_shufflevector(e, e, 4, 5, 6, 7), v4d);
+    const v8f r = x < -86.0f ? v8f{} : e;
+    std::memcpy(out + j, &r, sizeof r);
+  }
+  const v4d st = s0 + s1;
+  double sum = ((st[0] + st[1]) + st[2]) + st[3];
+  for (; j < count; ++j) {
+    const float x = static_cast<float>(psi[j] - static_cast<double>(c[j]) * inv_eps - m);
+    const float e = exp_core(x);
+    sum += static_cast<double>(e);
+    out[j] = x < -86.0f ? 0.0f : e;
+  }
+  const double phi = log_a - m - std::log(sum);
+  const double scale = std::exp(phi + m);  // a / Σ
+  const float scale_f = static_cast<float>(scale);
+  const float limit = static_cast<float>(std::exp(-87.0) / scale);
+  for (j = 0; j + 8 <= count; j += 8) {
+    v8f e;
+    std::memcpy(&e, out + j, sizeof e);
+    const v8f r = e < limit ? v8f{} : e * scale_f;
+    std::memcpy(out + j, &r, sizeof r);
+  }
+  for (; j < count; ++j) out[j] = out[j] < limit ? 0.0f : out[j] * scale_f;
+  return phi;
 }
 
 // Σ_j k_j v_j in double: 4 accumulators of 4 lanes over blocks of 16, then ((a0 + a1) + (a2 + a3)) lanes 0..3, then
