@@ -49,6 +49,7 @@ struct ImrCommandOptions {
   bool epsilon_scaling = ImrOptions{}.sinkhorn.epsilon_scaling;
   int threads = 0;
   int anderson = ImrOptions{}.sinkhorn.anderson_depth;
+  int anderson_max_restarts = ImrOptions{}.sinkhorn.anderson_max_restarts;
   double epsilon_factor = ImrOptions{}.sinkhorn.epsilon_factor;
   double stage_tolerance = ImrOptions{}.sinkhorn.stage_tolerance;
   bool plain_solver = false;
@@ -136,6 +137,7 @@ int run_imr(const ImrCommandOptions& o) {
   options.sinkhorn.epsilon_factor = o.epsilon_factor;
   options.sinkhorn.stage_tolerance = o.stage_tolerance;
   options.sinkhorn.method = method;
+  options.sinkhorn.anderson_max_restarts = o.anderson_max_restarts;
   if (o.plain_solver && o.accelerated) fail("options --plain-solver and --accelerated exclude each other");
   if (o.plain_solver) {
     // The plain solver (the default): plain iterations, ε halved, stages to 1e-2.
@@ -324,6 +326,9 @@ Run add_imr_command(CLI::App& app) {
   sub->add_option("--anderson", o->anderson,
                   "Anderson acceleration depth (0 = plain Sinkhorn); the solve still ends on plain iterations with "
                   "the same stopping rule")
+      ->capture_default_str();
+  sub->add_option("--anderson-max-restarts", o->anderson_max_restarts,
+                  "Safeguard restarts after which an epsilon stage goes on with plain iterations (-1: no limit)")
       ->capture_default_str();
   sub->add_option("--epsilon-factor", o->epsilon_factor, "epsilon-scaling: ratio of successive epsilon stages")
       ->capture_default_str();

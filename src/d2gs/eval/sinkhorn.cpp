@@ -784,7 +784,8 @@ SinkhornResult sinkhorn_kernel(std::span<const double> a, std::span<const double
     absorb(inv_eps);
     ++stage.absorptions;
     bool accelerate = options.anderson_depth > 0;
-    constexpr int kMaxRestarts = 5;
+    const int max_restarts = options.anderson_max_restarts < 0 ? std::numeric_limits<int>::max()
+                                                               : options.anderson_max_restarts;
     anderson.reset();
     while (result.iterations < options.max_iterations) {
       // Rows (u, φ) and the chunks of Kᵀu.
@@ -872,7 +873,7 @@ SinkhornResult sinkhorn_kernel(std::span<const double> a, std::span<const double
         const int restarts = anderson.restarts();
         anderson.step(psi, psi_next);
         stage.restarts += anderson.restarts() - restarts;
-        if (stage.restarts >= kMaxRestarts) accelerate = false;
+        if (stage.restarts >= max_restarts) accelerate = false;
       } else {
         psi.swap(psi_next);
       }
@@ -991,7 +992,8 @@ SinkhornResult sinkhorn(std::span<const double> a, std::span<const double> b, co
     // Anderson acceleration in this stage until, in the last stage, an iteration has reached the tolerance;
     // then plain iterations decide the stop.
     bool accelerate = options.anderson_depth > 0;
-    constexpr int kMaxRestarts = 5;
+    const int max_restarts = options.anderson_max_restarts < 0 ? std::numeric_limits<int>::max()
+                                                               : options.anderson_max_restarts;
     anderson.reset();
     while (result.iterations < options.max_iterations) {
 #pragma omp parallel num_threads(threads)
@@ -1040,7 +1042,7 @@ SinkhornResult sinkhorn(std::span<const double> a, std::span<const double> b, co
         stage.restarts += anderson.restarts() - restarts;
         // Extrapolation keeps failing in this stage: plain iterations for the rest of it (never much worse
         // than the plain solver).
-        if (stage.restarts >= kMaxRestarts) accelerate = false;
+        if (stage.restarts >= max_restarts) accelerate = false;
       } else {
         psi.swap(psi_next);
       }

@@ -108,6 +108,8 @@ struct SinkhornOptions {
   // iteration changes the potentials by less than `tolerance`, the solve goes on with plain iterations until one
   // of them does too: the stopping rule of the plain solver.
   int anderson_depth = 0;
+  // Safeguard restarts after which a stage goes on with plain iterations (< 0: no limit).
+  int anderson_max_restarts = 5;
   SinkhornMethod method = SinkhornMethod::LogDomain;
   double absorb_threshold = 20.0;  // τ of the stabilised-kernel solver (log-scalings), in (0, 30]
 };
