@@ -139,12 +139,7 @@ int run_imr(const ImrCommandOptions& o) {
   options.sinkhorn.method = method;
   options.sinkhorn.anderson_max_restarts = o.anderson_max_restarts;
   if (o.plain_solver && o.accelerated) fail("options --plain-solver and --accelerated exclude each other");
-  if (o.plain_solver) {
-    // The plain solver (the default): plain iterations, ε halved, stages to 1e-2.
-    options.sinkhorn.anderson_depth = 0;
-    options.sinkhorn.epsilon_factor = 0.5;
-    options.sinkhorn.stage_tolerance = 1e-2;
-  }
+  if (o.plain_solver) use_plain_solver(options.sinkhorn);  // plain iterations, ε halved, stages to 1e-2
   if (o.accelerated) use_accelerated_solver(options.sinkhorn);
   // A solve that takes long says where it stands every 10 s (iteration, change against the tolerance).
   {
@@ -321,7 +316,7 @@ Run add_imr_command(CLI::App& app) {
   sub->add_flag("--no-clamp", o->no_clamp, "Do not clamp the shape term to [0, max position term]");
   sub->add_flag("--no-normalize", o->no_normalize, "Do not divide the cost by its mean (epsilon in raw units)");
   sub->add_flag("--epsilon-scaling,!--no-epsilon-scaling", o->epsilon_scaling,
-                "Anneal epsilon from the largest cost down (x0.5 steps, warm starts; default on): the same plan in "
+                "Anneal epsilon from the largest cost down (warm starts; default on): the same plan in "
                 "far fewer iterations; --no-epsilon-scaling solves at epsilon from the start");
   sub->add_option("--anderson", o->anderson,
                   "Anderson acceleration depth (0 = plain Sinkhorn); the solve still ends on plain iterations with "
@@ -336,11 +331,11 @@ Run add_imr_command(CLI::App& app) {
                   "epsilon-scaling: potential change that ends an intermediate stage")
       ->capture_default_str();
   sub->add_flag("--plain-solver", o->plain_solver,
-                "Plain Sinkhorn, epsilon halved per stage, intermediate stages to 1e-2 (the default; overrides "
-                "--anderson, --epsilon-factor, --stage-tolerance)");
+                "Plain Sinkhorn, epsilon halved per stage, intermediate stages to 1e-2 (the default before the "
+                "stabilised kernel; overrides --anderson, --epsilon-factor, --stage-tolerance, --anderson-max-restarts)");
   sub->add_flag("--accelerated", o->accelerated,
-                "Anderson acceleration (depth 10), epsilon /4 per stage, intermediate stages to 0.1: the same plan "
-                "and stopping rule in fewer iterations (docs/imr.md)");
+                "Anderson acceleration (depth 10, no restart cap), epsilon /4 per stage, intermediate stages to 0.1: "
+                "the same plan and stopping rule in fewer iterations (the default; docs/imr.md)");
   sub->add_option("--solver", o->solver,
                   "Sinkhorn iterations: kernel (stabilised scaling form: a float kernel stored once per absorption, "
                   "matrix-vector products per iteration) or log-domain (a log-sum-exp per entry per half-iteration); "
