@@ -49,11 +49,13 @@ struct ImrCommandOptions {
   bool epsilon_scaling = ImrOptions{}.sinkhorn.epsilon_scaling;
   int threads = 0;
   int anderson = ImrOptions{}.sinkhorn.anderson_depth;
+  int anderson_max_restarts = ImrOptions{}.sinkhorn.anderson_max_restarts;
   double epsilon_factor = ImrOptions{}.sinkhorn.epsilon_factor;
   double stage_tolerance = ImrOptions{}.sinkhorn.stage_tolerance;
   bool plain_solver = false;
   bool accelerated = false;
   std::string cost = "stored";
+  std::string solver = to_string(ImrOptions{}.sinkhorn.method);
   std::string json;
 };
 
@@ -85,7 +87,7 @@ nlohmann::json stages_json(const TransportResult& t) {
   nlohmann::json out = nlohmann::json::array();
   for (const SinkhornStage& s : t.stages)
     out.push_back({{"epsilon", s.epsilon}, {"iterations", s.iterations}, {"accelerated", s.accelerated}, {"restarts", s.restarts},
-                   {"seconds", s.seconds}});
+                   {"absorptions", s.absorptions}, {"row_refreshes", s.row_refreshes}, {"seconds", s.seconds}});
   return out;
 }
 
@@ -103,6 +105,10 @@ int run_imr(const ImrCommandOptions& o) {
   else if (o.cost == "stored-double") storage = CostStorage::StoredDouble;
   else if (o.cost == "on-the-fly") storage = CostStorage::OnTheFly;
   else fail("option --cost must be stored, stored-double or on-the-fly (got '{}')", o.cost);
+  SinkhornMethod method = SinkhornMethod::LogDomain;
+  if (o.solver == "log-domain") method = SinkhornMethod::LogDomain;
+  else if (o.solver == "kernel") method = SinkhornMethod::StabilizedKernel;
+  else fail("option --solver must be kernel or log-domain (got '{}')", o.solver);
   if (o.inputs.size() < 2) fail("imr needs at least 2 models, got {}", o.inputs.size());
   if (!(o.epsilon > 0.0) || !std::isfinite(o.epsilon)) fail("option --epsilon must be positive (got {})", o.epsilon);
   if (!(o.tolerance >= 0.0) || !std::isfinite(o.tolerance))
@@ -130,13 +136,10 @@ int run_imr(const ImrCommandOptions& o) {
   options.sinkhorn.anderson_depth = o.anderson;
   options.sinkhorn.epsilon_factor = o.epsilon_factor;
   options.sinkhorn.stage_tolerance = o.stage_tolerance;
+  options.sinkhorn.method = method;
+  options.sinkhorn.anderson_max_restarts = o.anderson_max_restarts;
   if (o.plain_solver && o.accelerated) fail("options --plain-solver and --accelerated exclude each other");
-  if (o.plain_solver) {
-    // The plain solver (the default): plain iterations, ε halved, stages to 1e-2.
-    options.sinkhorn.anderson_depth = 0;
-    options.sinkhorn.epsilon_factor = 0.5;
-    options.sinkhorn.stage_tolerance = 1e-2;
-  }
+  if (o.plain_solver) use_plain_solver(options.sinkhorn);  // plain iterations, ε halved, stages to 1e-2
   if (o.accelerated) use_accelerated_solver(options.sinkhorn);
   // A solve that takes long says where it stands every 10 s (iteration, change against the tolerance).
   {
@@ -265,6 +268,7 @@ int run_imr(const ImrCommandOptions& o) {
                       {"epsilon_factor", options.sinkhorn.epsilon_factor},
                       {"stage_tolerance", options.sinkhorn.stage_tolerance},
                       {"anderson_depth", options.sinkhorn.anderson_depth},
+                      {"solver", to_string(options.sinkhorn.method)},
                       {"debiased", o.debiased}};
     nlohmann::json pairs = nlohmann::json::array();
     for (const auto& p : result.pairs) {
@@ -312,11 +316,14 @@ Run add_imr_command(CLI::App& app) {
   sub->add_flag("--no-clamp", o->no_clamp, "Do not clamp the shape term to [0, max position term]");
   sub->add_flag("--no-normalize", o->no_normalize, "Do not divide the cost by its mean (epsilon in raw units)");
   sub->add_flag("--epsilon-scaling,!--no-epsilon-scaling", o->epsilon_scaling,
-                "Anneal epsilon from the largest cost down (x0.5 steps, warm starts; default on): the same plan in "
+                "Anneal epsilon from the largest cost down (warm starts; default on): the same plan in "
                 "far fewer iterations; --no-epsilon-scaling solves at epsilon from the start");
   sub->add_option("--anderson", o->anderson,
                   "Anderson acceleration depth (0 = plain Sinkhorn); the solve still ends on plain iterations with "
                   "the same stopping rule")
+      ->capture_default_str();
+  sub->add_option("--anderson-max-restarts", o->anderson_max_restarts,
+                  "Safeguard restarts after which an epsilon stage goes on with plain iterations (-1: no limit)")
       ->capture_default_str();
   sub->add_option("--epsilon-factor", o->epsilon_factor, "epsilon-scaling: ratio of successive epsilon stages")
       ->capture_default_str();
@@ -324,11 +331,16 @@ Run add_imr_command(CLI::App& app) {
                   "epsilon-scaling: potential change that ends an intermediate stage")
       ->capture_default_str();
   sub->add_flag("--plain-solver", o->plain_solver,
-                "Plain Sinkhorn, epsilon halved per stage, intermediate stages to 1e-2 (the default; overrides "
-                "--anderson, --epsilon-factor, --stage-tolerance)");
+                "Plain Sinkhorn, epsilon halved per stage, intermediate stages to 1e-2 (the default before the "
+                "stabilised kernel; overrides --anderson, --epsilon-factor, --stage-tolerance, --anderson-max-restarts)");
   sub->add_flag("--accelerated", o->accelerated,
-                "Anderson acceleration (depth 10), epsilon /4 per stage, intermediate stages to 0.1: the same plan "
-                "and stopping rule in fewer iterations (docs/imr.md)");
+                "Anderson acceleration (depth 10, no restart cap), epsilon /4 per stage, intermediate stages to 0.1: "
+                "the same plan and stopping rule in fewer iterations (the default; docs/imr.md)");
+  sub->add_option("--solver", o->solver,
+                  "Sinkhorn iterations: kernel (stabilised scaling form: a float kernel stored once per absorption, "
+                  "matrix-vector products per iteration) or log-domain (a log-sum-exp per entry per half-iteration); "
+                  "the same problem and stopping rule (docs/imr.md)")
+      ->capture_default_str();
   sub->add_option("--threads", o->threads, "OpenMP threads (0 = automatic)")->capture_default_str();
   sub->add_option("--json", o->json, "Write every number to this JSON file");
   return [o]() -> int { return run_imr(*o); };

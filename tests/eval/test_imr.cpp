@@ -1,5 +1,6 @@
 // The IMR cost, transport and metric (method.md §7 steps 3-6) on hand-built mixtures.
 #include <cmath>
+#include <cstdio>
 #include <random>
 
 #include <gtest/gtest.h>
@@ -130,7 +131,11 @@ TEST(Imr, AcceleratedSolverMatchesThePlainOne) {
     const GaussianMixture a = random_mixture(400, seed), b = random_mixture(380, seed + 100);
     ImrOptions fast;
     use_accelerated_solver(fast.sinkhorn);
-    const ImrOptions plain;  // the default
+    fast.sinkhorn.method = SinkhornMethod::LogDomain;
+    ImrOptions plain;  // the default before the stabilised kernel
+    use_plain_solver(plain.sinkhorn);
+    plain.sinkhorn.method = SinkhornMethod::LogDomain;
+    const ImrOptions kernel;  // the default: stabilised kernel, accelerated
     ImrOptions tight = plain;  // the converged value
     tight.sinkhorn.tolerance = 1e-6;
     tight.storage = CostStorage::StoredDouble;
@@ -140,6 +145,10 @@ TEST(Imr, AcceleratedSolverMatchesThePlainOne) {
     ASSERT_TRUE(p.converged);
     ASSERT_TRUE(t.converged);
     EXPECT_NEAR(f.transport_cost, t.transport_cost, 1e-5 * t.transport_cost);
+    const TransportResult k = mixture_transport(a, b, kernel);
+    ASSERT_TRUE(k.converged);
+    EXPECT_NEAR(k.transport_cost, t.transport_cost, 1e-5 * t.transport_cost);
+    EXPECT_LT(k.marginal_error, 1e-4);
     EXPECT_NEAR(f.transport_cost, p.transport_cost, 1e-4 * p.transport_cost);
     EXPECT_LE(f.iterations, p.iterations);
     EXPECT_LT(f.marginal_error, 1e-4);
@@ -147,16 +156,23 @@ TEST(Imr, AcceleratedSolverMatchesThePlainOne) {
   // Identical models converge to the floor with the accelerated solver too.
   const GaussianMixture a = random_mixture(350, 8);
   ImrOptions plain;
-  plain.sinkhorn.anderson_depth = 0;
+  use_plain_solver(plain.sinkhorn);
+  plain.sinkhorn.method = SinkhornMethod::LogDomain;
   plain.sinkhorn.tolerance = 1e-6;
   plain.storage = CostStorage::StoredDouble;
   ImrOptions fast;
-  use_accelerated_solver(fast.sinkhorn);
-  const TransportResult self_fast = mixture_transport(a, a, fast), self_plain = mixture_transport(a, a, plain);
-  EXPECT_TRUE(self_fast.converged);
-  EXPECT_LT(self_fast.last_change, 1e-4);
-  EXPECT_GT(self_fast.transport_cost, 0.0);
-  EXPECT_NEAR(self_fast.transport_cost, self_plain.transport_cost, 1e-5 * self_plain.transport_cost);
+  fast.sinkhorn.method = SinkhornMethod::LogDomain;
+  const ImrOptions kernel;  // the default
+  const TransportResult self_plain = mixture_transport(a, a, plain);
+  for (const ImrOptions* o : {static_cast<const ImrOptions*>(&fast), &kernel}) {
+    const TransportResult self_fast = mixture_transport(a, a, *o);
+    EXPECT_TRUE(self_fast.converged);
+    EXPECT_LT(self_fast.last_change, 1e-4);
+    EXPECT_GT(self_fast.transport_cost, 0.0);
+    EXPECT_NEAR(self_fast.transport_cost, self_plain.transport_cost, 1e-5 * self_plain.transport_cost);
+    std::printf("[ floor    ] identical models, %s: S = %.8g, %d iterations, marginal error %.1e\n",
+                to_string(o->sinkhorn.method), self_fast.transport_cost, self_fast.iterations, self_fast.marginal_error);
+  }
 }
 
 TEST(Imr, ShiftedCopyCostsTheSquaredShift) {

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <numeric>
 #include <random>
 
@@ -394,6 +395,188 @@ TEST(SinkhornAnderson, DepthZeroIsThePlainSolverBitForBit) {
   for (const SinkhornStage& stage : b.stages) EXPECT_EQ(stage.accelerated, 0);
   o.anderson_depth = -1;
   EXPECT_THROW(sinkhorn(p.a, p.b, cost, o), Error);
+}
+
+// ---- the stabilised-kernel (scaling-form) solver ----
+
+// A cost with a large range: the clustered problem with its far outliers pushed further out (normalised costs up
+// to ~10⁴·ε at ε = 0.01), so the kernel spans far more than float's exponent range.
+Problem hard_problem(std::size_t n, std::size_t m, unsigned seed) {
+  Problem p = clustered_problem(n, m, seed);
+  double mx = 0.0;
+  for (const double c : p.c) mx = std::max(mx, c);
+  for (auto& c : p.c) c = c > 0.5 * mx ? 3.0 * c : c;  // the far outliers' costs tripled
+  return p;
+}
+
+TEST(SinkhornKernel, MatchesTheLogDomainSolver) {
+  for (const unsigned seed : {1u, 2u}) {
+    const Problem random = random_problem(211, 187, seed);
+    const Problem clustered = clustered_problem(240, 260, seed);
+    const Problem hard = hard_problem(300, 280, seed);
+    for (const Problem* p : {&random, &clustered, &hard}) {
+      const DenseCostMatrix<double> cost(p->n, p->m, p->c);
+      SinkhornOptions o;
+      o.epsilon = p == &random ? 0.002 : (p == &hard ? 0.01 : 0.02);
+      o.epsilon_scaling = true;
+      o.max_iterations = 200000;
+      o.tolerance = 1e-9;
+      o.double_exp = true;
+      const SinkhornResult exact = sinkhorn(p->a, p->b, cost, o);
+      ASSERT_TRUE(exact.converged);
+      // Release-like settings, float kernel, plain and Anderson.
+      o.tolerance = 1e-4;
+      o.double_exp = false;
+      o.method = SinkhornMethod::StabilizedKernel;
+      const DenseCostMatrix<float> cost_f(p->n, p->m, to_float(p->c), /*with_columns=*/false);
+      const SinkhornResult plain = sinkhorn(p->a, p->b, cost_f, o);
+      o.anderson_depth = 10;
+      const SinkhornResult fast = sinkhorn(p->a, p->b, cost_f, o);
+      // Tight: the float kernel has no exp floor on the change.
+      o.tolerance = 1e-10;
+      const SinkhornResult tight = sinkhorn(p->a, p->b, cost_f, o);
+      for (const SinkhornResult* r : {&plain, &fast, &tight}) {
+        ASSERT_TRUE(r->converged) << "seed " << seed;
+        EXPECT_LT(r->marginal_error, 1e-4);
+        int total = 0, absorptions = 0;
+        for (const SinkhornStage& stage : r->stages) {
+          total += stage.iterations;
+          absorptions += stage.absorptions;
+        }
+        EXPECT_EQ(total, r->iterations);
+        EXPECT_GE(absorptions, static_cast<int>(r->stages.size()));  // at least one per ε stage
+      }
+      EXPECT_NEAR(plain.transport_cost, exact.transport_cost, 1e-4 * exact.transport_cost) << "seed " << seed;
+      EXPECT_NEAR(fast.transport_cost, exact.transport_cost, 1e-5 * exact.transport_cost) << "seed " << seed;
+      EXPECT_NEAR(tight.transport_cost, exact.transport_cost, 1e-7 * exact.transport_cost) << "seed " << seed;
+      EXPECT_LT(tight.marginal_error, 1e-7);
+      EXPECT_LT(fast.iterations, plain.iterations);
+    }
+  }
+}
+
+// Without ε-scaling at a small ε the kernel starts far below float's range: rows are updated exactly at each
+// absorption, scalings that leave [e^−τ, e^τ] trigger more of them (and exact row updates, exact updates of empty
+// columns); the solve still reaches the log-domain solver's plan.
+TEST(SinkhornKernel, LargeCostRangeWithoutEpsilonScaling) {
+  const Problem p = hard_problem(150, 170, 7);
+  const DenseCostMatrix<double> cost(p.n, p.m, p.c);
+  SinkhornOptions o;
+  o.epsilon = 0.05;
+  o.max_iterations = 100000;
+  o.tolerance = 1e-9;
+  o.double_exp = true;
+  const SinkhornResult exact = sinkhorn(p.a, p.b, cost, o);
+  ASSERT_TRUE(exact.converged);
+  double mx = 0.0;
+  for (const double c : p.c) mx = std::max(mx, c);
+  EXPECT_GT(mx / o.epsilon, 1000.0);
+  o.double_exp = false;
+  o.tolerance = 1e-8;
+  o.method = SinkhornMethod::StabilizedKernel;
+  const SinkhornResult k = sinkhorn(p.a, p.b, DenseCostMatrix<float>(p.n, p.m, to_float(p.c)), o);
+  ASSERT_TRUE(k.converged);
+  EXPECT_GT(k.stages.front().absorptions, 1);  // column scalings left [e^−τ, e^τ]
+  std::printf("[ kernel   ] no ε-scaling, max C/ε = %.0f: %d iterations, %d absorptions, %lld row refreshes\n",
+              mx / o.epsilon, k.iterations, k.stages.front().absorptions, k.stages.front().row_refreshes);
+  EXPECT_NEAR(k.transport_cost, exact.transport_cost, 1e-6 * exact.transport_cost);
+  EXPECT_LT(k.marginal_error, 1e-6);
+  // A small absorb threshold: many more absorptions, the same plan.
+  o.absorb_threshold = 2.0;
+  const SinkhornResult small = sinkhorn(p.a, p.b, DenseCostMatrix<float>(p.n, p.m, to_float(p.c)), o);
+  ASSERT_TRUE(small.converged);
+  EXPECT_GT(small.stages.front().absorptions, k.stages.front().absorptions);
+  EXPECT_NEAR(small.transport_cost, exact.transport_cost, 1e-6 * exact.transport_cost);
+}
+
+TEST(SinkhornKernel, DeterministicAcrossThreadCounts) {
+  // More rows than one chunk of the transposed product (256), and a tail of rows and columns.
+  const Problem p = hard_problem(601, 333, 9);
+  const DenseCostMatrix<float> cost(p.n, p.m, to_float(p.c), false);
+  SinkhornOptions o;
+  o.epsilon = 0.01;
+  o.epsilon_scaling = true;
+  o.epsilon_factor = 0.25;
+  o.stage_tolerance = 0.1;
+  o.anderson_depth = 10;
+  o.method = SinkhornMethod::StabilizedKernel;
+  o.threads = 1;
+  const SinkhornResult one = sinkhorn(p.a, p.b, cost, o);
+  ASSERT_TRUE(one.converged);
+  for (const int threads : {2, 3, 7}) {
+    o.threads = threads;
+    const SinkhornResult other = sinkhorn(p.a, p.b, cost, o);
+    EXPECT_EQ(other.transport_cost, one.transport_cost) << threads;  // bitwise
+    EXPECT_EQ(other.marginal_error, one.marginal_error);
+    EXPECT_EQ(other.iterations, one.iterations);
+    EXPECT_EQ(other.f, one.f);
+    EXPECT_EQ(other.g, one.g);
+  }
+}
+
+TEST(SinkhornKernel, CostFormsAgree) {
+  // Stored float with and without the column copy, stored double, on the fly (double): the same plan.
+  const Problem p = clustered_problem(130, 120, 4);
+  SinkhornOptions o;
+  o.epsilon = 0.02;
+  o.epsilon_scaling = true;
+  o.tolerance = 1e-8;
+  o.method = SinkhornMethod::StabilizedKernel;
+  const SinkhornResult a = sinkhorn(p.a, p.b, DenseCostMatrix<float>(p.n, p.m, to_float(p.c)), o);
+  const SinkhornResult b = sinkhorn(p.a, p.b, DenseCostMatrix<float>(p.n, p.m, to_float(p.c), false), o);
+  const SinkhornResult c = sinkhorn(p.a, p.b, DenseCostMatrix<double>(p.n, p.m, p.c, false), o);
+  const SinkhornResult d = sinkhorn(p.a, p.b, ComputedCost(p), o);
+  EXPECT_EQ(a.transport_cost, b.transport_cost);
+  EXPECT_EQ(c.transport_cost, d.transport_cost);
+  EXPECT_NEAR(a.transport_cost, c.transport_cost, 1e-6 * c.transport_cost);
+  o.double_exp = true;
+  const SinkhornResult e = sinkhorn(p.a, p.b, ComputedCost(p), o);
+  EXPECT_NEAR(e.transport_cost, c.transport_cost, 1e-6 * c.transport_cost);
+  // Rows-only storage still gives columns (gathered).
+  const DenseCostMatrix<float> rows_only(p.n, p.m, to_float(p.c), false);
+  std::vector<double> scratch(std::max(p.n, p.m));
+  const CostSpan col = rows_only.column(5, scratch.data());
+  ASSERT_NE(col.f64, nullptr);
+  for (std::size_t i = 0; i < p.n; ++i) EXPECT_EQ(col.f64[i], static_cast<double>(static_cast<float>(p.c[i * p.m + 5])));
+}
+
+TEST(SinkhornKernel, IdenticalSupportsConvergeToTheFloor) {
+  // A distribution against itself: S > 0 (the entropic floor), the same as the log-domain solver's.
+  const Problem q = clustered_problem(200, 200, 5);
+  Problem p = q;
+  p.b = p.a;
+  // The cost of the source points against themselves: rebuild symmetric from the rows' own points is not exposed,
+  // so use C + Cᵀ restricted to a square: symmetric, zero-free, positive.
+  for (std::size_t i = 0; i < p.n; ++i)
+    for (std::size_t j = 0; j < p.m; ++j) p.c[i * p.m + j] = i == j ? 0.0 : q.c[i * q.m + j] + q.c[j * q.m + i];
+  const DenseCostMatrix<float> cost(p.n, p.m, to_float(p.c));
+  SinkhornOptions o;
+  o.epsilon = 0.1;
+  o.epsilon_scaling = true;
+  o.anderson_depth = 10;
+  o.epsilon_factor = 0.25;
+  o.stage_tolerance = 0.1;
+  const SinkhornResult log_domain = sinkhorn(p.a, p.b, cost, o);
+  o.method = SinkhornMethod::StabilizedKernel;
+  const SinkhornResult k = sinkhorn(p.a, p.b, cost, o);
+  ASSERT_TRUE(log_domain.converged);
+  ASSERT_TRUE(k.converged);
+  EXPECT_GT(k.transport_cost, 0.0);
+  EXPECT_NEAR(k.transport_cost, log_domain.transport_cost, 1e-5 * log_domain.transport_cost);
+  EXPECT_LT(k.marginal_error, 1e-5);
+}
+
+TEST(SinkhornKernel, RejectsBadThreshold) {
+  const Problem p = random_problem(20, 30, 1);
+  const DenseCostMatrix<float> cost(p.n, p.m, to_float(p.c));
+  SinkhornOptions o;
+  o.method = SinkhornMethod::StabilizedKernel;
+  for (const double tau : {0.0, -1.0, 31.0, std::nan("")}) {
+    o.absorb_threshold = tau;
+    EXPECT_THROW(sinkhorn(p.a, p.b, cost, o), Error) << tau;
+  }
+  EXPECT_STREQ(to_string(SinkhornMethod::StabilizedKernel), "kernel");
+  EXPECT_STREQ(to_string(SinkhornMethod::LogDomain), "log-domain");
 }
 
 TEST(Sinkhorn, DebiasedDivergenceArithmetic) { EXPECT_DOUBLE_EQ(debiased_divergence(5, 2, 4), 2); }

@@ -236,12 +236,14 @@ TransportResult mixture_transport(const GaussianMixture& source, const GaussianM
   const auto start = std::chrono::steady_clock::now();
   const MixtureCost cost(source, target, options.cost);
   SinkhornResult solved;
+  const bool kernel = options.sinkhorn.method == SinkhornMethod::StabilizedKernel;
   switch (options.storage) {
+    // The stabilised-kernel solver reads the cost by rows only: no column-major copy.
     case CostStorage::StoredFloat:
-      solved = sinkhorn(source.weights, target.weights, store_cost<float>(cost), options.sinkhorn);
+      solved = sinkhorn(source.weights, target.weights, store_cost<float>(cost, !kernel), options.sinkhorn);
       break;
     case CostStorage::StoredDouble:
-      solved = sinkhorn(source.weights, target.weights, store_cost<double>(cost), options.sinkhorn);
+      solved = sinkhorn(source.weights, target.weights, store_cost<double>(cost, !kernel), options.sinkhorn);
       break;
     case CostStorage::OnTheFly:
       solved = sinkhorn(source.weights, target.weights, cost, options.sinkhorn);
@@ -264,8 +266,12 @@ TransportResult mixture_transport(const GaussianMixture& source, const GaussianM
 std::string stage_summary(const TransportResult& t) {
   std::string out;
   for (const SinkhornStage& s : t.stages)
-    out += fmt::format("{}{:.4g}: {} ({} accelerated, {} restarts), {:.2f} s", out.empty() ? "" : "; ", s.epsilon,
-                       s.iterations, s.accelerated, s.restarts, s.seconds);
+    out += fmt::format("{}{:.4g}: {} ({} accelerated, {} restarts{}), {:.2f} s", out.empty() ? "" : "; ", s.epsilon,
+                       s.iterations, s.accelerated, s.restarts,
+                       s.absorptions > 0 ? fmt::format(", {} absorptions, {} row refreshes", s.absorptions,
+                                                       s.row_refreshes)
+                                         : std::string(),
+                       s.seconds);
   return out;
 }
 

@@ -64,13 +64,42 @@ private:
   std::vector<glm::dmat3> t_sqrt_;
 };
 
+// The accelerated solver (docs/imr.md, "Solver"): ε ÷4 per stage, intermediate stages to a change of 0.1, Anderson
+// acceleration of depth 10 without a cap on its safeguard restarts, ending on plain iterations with the same stopping
+// rule. Same problem and value; 6× fewer iterations on a 2 000-sample fern pair, and with the stabilised-kernel
+// iterations a 10 000-sample fern pair in 264 iterations, 45 CPU-s (docs/benchmarks.md). The default of d2gs imr.
+inline void use_accelerated_solver(SinkhornOptions& o) {
+  o.epsilon_factor = 0.25;
+  o.stage_tolerance = 0.1;
+  o.anderson_depth = 10;
+  o.anderson_max_restarts = -1;
+}
+
+// The plain solver (d2gs imr --plain-solver; the default before the stabilised kernel): plain iterations, ε halved
+// per stage, intermediate stages to 1e-2.
+inline void use_plain_solver(SinkhornOptions& o) {
+  o.anderson_depth = 0;
+  o.epsilon_factor = 0.5;
+  o.stage_tolerance = 1e-2;
+  o.anderson_max_restarts = 5;
+}
+
+// The IMR default: method.md §7 (ε = 0.1, tolerance 1e-4, ≤ 10 000 iterations) with ε-scaling, stabilised-kernel
+// iterations and the accelerated schedule. The same entropic plan (same ε, same stopping rule on the last stage).
+inline SinkhornOptions default_imr_sinkhorn() {
+  SinkhornOptions o;
+  o.epsilon_scaling = true;
+  o.method = SinkhornMethod::StabilizedKernel;
+  use_accelerated_solver(o);
+  return o;
+}
+
 struct ImrOptions {
   MixtureOptions mixture;  // samples (depth strata), sanitising
   CostOptions cost;
-  // method.md §7 (ε = 0.1, tolerance 1e-4, ≤ 10 000 iterations) with ε-scaling on: the same entropic plan (same
-  // ε, same stopping rule on the last stage) in far fewer iterations on trained models, whose normalised costs
-  // span ~10³·ε (docs/imr.md, docs/benchmarks.md). use_accelerated_solver() switches to Anderson acceleration.
-  SinkhornOptions sinkhorn = {.epsilon_scaling = true};
+  // default_imr_sinkhorn(): ε-scaling, stabilised-kernel iterations, Anderson (docs/imr.md, docs/benchmarks.md);
+  // use_plain_solver() and method = SinkhornMethod::LogDomain give the earlier solvers.
+  SinkhornOptions sinkhorn = default_imr_sinkhorn();
   CostStorage storage = CostStorage::StoredFloat;
   bool debiased = false;   // also compute S(A,A), S(B,B) and the debiased divergence
 };
@@ -88,16 +117,6 @@ struct TransportResult {
   double seconds = 0.0;         // cost preparation + solve
   std::vector<SinkhornStage> stages;  // the solver's ε stages (iterations, time)
 };
-
-// The accelerated solver (docs/imr.md, "Solver"): ε ÷4 per stage, intermediate stages to a change of 0.1, Anderson
-// acceleration of depth 10, ending on plain iterations with the same stopping rule. Same problem and value; 6×
-// fewer iterations on a 2 000-sample fern pair. Not the default of d2gs imr: not yet shown faster at 10 000
-// samples (docs/benchmarks.md). The experiment runner (2 000 samples) uses it.
-inline void use_accelerated_solver(SinkhornOptions& o) {
-  o.epsilon_factor = 0.25;
-  o.stage_tolerance = 0.1;
-  o.anderson_depth = 10;
-}
 
 TransportResult mixture_transport(const GaussianMixture& source, const GaussianMixture& target,
                                   const ImrOptions& options);

@@ -243,6 +243,214 @@ void plan(CostSpan span, const double* pot, double shift, double inv_eps, std::s
     plan_f64(span.f64, pot, shift, inv_eps, count, precise, mass, cost);
 }
 
+// ---- stabilised-kernel (scaling-form) iterations ----
+
+// out_j = exp(phi + psi_j − c_j·inv_eps) in float; 0 where the exponent is below −87 (no subnormal floats).
+template <class T>
+D2GS_ALWAYS_INLINE void kernel_row_body(const T* c, const double* psi, double phi, double inv_eps, std::size_t count,
+                                        float* out) {
+  std::size_t j = 0;
+  for (; j + kLanes <= count; j += kLanes) {
+    const v8f x = __builtin_convertvector(load8(psi + j) - load8(c + j) * inv_eps + phi, v8f);
+    const v8f e = exp8(x);
+    const v8f r = x < -87.0f ? v8f{} : e;
+    std::memcpy(out + j, &r, sizeof r);
+  }
+  for (; j < count; ++j) {
+    const float x = static_cast<float>(psi[j] - static_cast<double>(c[j]) * inv_eps + phi);
+    out[j] = x < -87.0f ? 0.0f : exp_core(x);
+  }
+}
+
+// 4-lane vectors for the kernel products: GCC keeps 8-lane double accumulators in memory on AVX2, so these loops
+// use explicit 4-lane ones (one AVX register), with a fixed summation order.
+typedef double v4d __attribute__((vector_size(32)));
+typedef float v4f __attribute__((vector_size(16)));
+D2GS_ALWAYS_INLINE v4d load4(const float* p) {
+  v4f v;
+  std::memcpy(&v, p, sizeof v);
+  return __builtin_convertvector(v, v4d);
+}
+D2GS_ALWAYS_INLINE v4d load4(const double* p) {
+  v4d v;
+  std::memcpy(&v, p, sizeof v);
+  return v;
+}
+
+// The exact row update and its kernel row in one exp pass: with x_j = psi_j − c_j·inv_eps and M = max_j x_j,
+// returns φ = log a − M − log Σ_j e^(x_j − M) (the log-domain update) and writes out_j = e^(x_j − M) · a / Σ, i.e.
+// exp(φ + psi_j − c_j·inv_eps); 0 where that is below e^−87 (no subnormals) or x_j − M < −86. Explicit 4-lane
+// double / 8-lane float vectors (one AVX register each); the sum's order is fixed.
+template <class T>
+D2GS_ALWAYS_INLINE double kernel_row_exact_body(const T* c, const double* psi, double log_a, double inv_eps,
+                                                std::size_t count, float* out) {
+  constexpr double kNegInf = -std::numeric_limits<double>::infinity();
+  v4d m0 = v4d{} + kNegInf, m1 = m0;
+  std::size_t j = 0;
+  for (; j + 8 <= count; j += 8) {
+    const v4d x0 = load4(psi + j) - load4(c + j) * inv_eps, x1 = load4(psi + j + 4) - load4(c + j + 4) * inv_eps;
+    m0 = x0 > m0 ? x0 : m0;
+    m1 = x1 > m1 ? x1 : m1;
+  }
+  double m = kNegInf;
+  for (int k = 0; k < 4; ++k) m = std::max(m, std::max(m0[k], m1[k]));
+  for (; j < count; ++j) m = std::max(m, psi[j] - static_cast<double>(c[j]) * inv_eps);
+  v4d s0{}, s1{};
+  for (j = 0; j + 8 <= count; j += 8) {
+    const v4f x0 = __builtin_convertvector(load4(psi + j) - load4(c + j) * inv_eps - m, v4f);
+    const v4f x1 = __builtin_convertvector(load4(psi + j + 4) - load4(c + j + 4) * inv_eps - m, v4f);
+    const v8f x = __builtin_shufflevector(x0, x1, 0, 1, 2, 3, 4, 5, 6, 7);
+    const v8f e = exp8(x);
+    s0 += __builtin_convertvector(__builtin_shufflevector(e, e, 0, 1, 2, 3), v4d);
+    s1 += __builtin_convertvector(__builtin_shufflevector(e, e, 4, 5, 6, 7), v4d);
+    const v8f r = x < -86.0f ? v8f{} : e;
+    std::memcpy(out + j, &r, sizeof r);
+  }
+  const v4d st = s0 + s1;
+  double sum = ((st[0] + st[1]) + st[2]) + st[3];
+  for (; j < count; ++j) {
+    const float x = static_cast<float>(psi[j] - static_cast<double>(c[j]) * inv_eps - m);
+    const float e = exp_core(x);
+    sum += static_cast<double>(e);
+    out[j] = x < -86.0f ? 0.0f : e;
+  }
+  const double phi = log_a - m - std::log(sum);
+  const double scale = std::exp(phi + m);  // a / Σ
+  const float scale_f = static_cast<float>(scale);
+  const float limit = static_cast<float>(std::exp(-87.0) / scale);
+  for (j = 0; j + 8 <= count; j += 8) {
+    v8f e;
+    std::memcpy(&e, out + j, sizeof e);
+    const v8f r = e < limit ? v8f{} : e * scale_f;
+    std::memcpy(out + j, &r, sizeof r);
+  }
+  for (; j < count; ++j) out[j] = out[j] < limit ? 0.0f : out[j] * scale_f;
+  return phi;
+}
+
+// Σ_j k_j v_j in double: 4 accumulators of 4 lanes over blocks of 16, then ((a0 + a1) + (a2 + a3)) lanes 0..3, then
+// the tail (a fixed order).
+D2GS_ALWAYS_INLINE double dot_body(const float* k, const double* v, std::size_t count) {
+  v4d a0{}, a1{}, a2{}, a3{};
+  std::size_t j = 0;
+  for (; j + 16 <= count; j += 16) {
+    a0 += load4(k + j) * load4(v + j);
+    a1 += load4(k + j + 4) * load4(v + j + 4);
+    a2 += load4(k + j + 8) * load4(v + j + 8);
+    a3 += load4(k + j + 12) * load4(v + j + 12);
+  }
+  for (; j + 4 <= count; j += 4) a0 += load4(k + j) * load4(v + j);
+  const v4d t = (a0 + a1) + (a2 + a3);
+  double sum = ((t[0] + t[1]) + t[2]) + t[3];
+  for (; j < count; ++j) sum += static_cast<double>(k[j]) * v[j];
+  return sum;
+}
+
+// y_j += u_r · k_r,j for the given rows in order (the same bits as one row at a time).
+D2GS_ALWAYS_INLINE void axpy_body(const float* const* k, const double* u, std::size_t rows, double* y,
+                                  std::size_t count) {
+  std::size_t j = 0;
+  if (rows == 4) {
+    const float *k0 = k[0], *k1 = k[1], *k2 = k[2], *k3 = k[3];
+    const double u0 = u[0], u1 = u[1], u2 = u[2], u3 = u[3];
+    for (; j + 4 <= count; j += 4) {
+      v4d acc = load4(y + j);
+      acc += load4(k0 + j) * u0;
+      acc += load4(k1 + j) * u1;
+      acc += load4(k2 + j) * u2;
+      acc += load4(k3 + j) * u3;
+      std::memcpy(y + j, &acc, sizeof acc);
+    }
+  } else {
+    for (; j + 4 <= count; j += 4) {
+      v4d acc = load4(y + j);
+      for (std::size_t r = 0; r < rows; ++r) acc += load4(k[r] + j) * u[r];
+      std::memcpy(y + j, &acc, sizeof acc);
+    }
+  }
+  for (; j < count; ++j)
+    for (std::size_t r = 0; r < rows; ++r) y[j] += static_cast<double>(k[r][j]) * u[r];
+}
+
+// A row of the plan P_ij = exp(phi + psi_j − c_ij·inv_eps) as plan_body computes it (row maximum taken out), its
+// mass and cost, and col_j += P_ij.
+template <class T>
+D2GS_ALWAYS_INLINE void plan_row_body(const T* c, const double* pot, double shift, double inv_eps, std::size_t count,
+                                      double* col, double* mass, double* cost) {
+  const double m = max_arg(c, pot, inv_eps, count);
+  if (!std::isfinite(m)) {
+    *mass = *cost = 0.0;
+    return;
+  }
+  const double scale = std::exp(shift + m);
+  v8d acc_mass{}, acc_cost{};
+  std::size_t j = 0;
+  for (; j + kLanes <= count; j += kLanes) {
+    const v8d ck = load8(c + j);
+    const v8d p = __builtin_convertvector(exp8(__builtin_convertvector(load8(pot + j) - ck * inv_eps - m, v8f)), v8d);
+    acc_mass += p;
+    acc_cost += p * ck;
+    v8d y = load8(col + j);
+    y += p * scale;
+    std::memcpy(col + j, &y, sizeof y);
+  }
+  double sm = hsum(acc_mass), sc = hsum(acc_cost);
+  for (; j < count; ++j) {
+    const double ck = static_cast<double>(c[j]);
+    const double p = static_cast<double>(exp_core(static_cast<float>(pot[j] - ck * inv_eps - m)));
+    sm += p;
+    sc += p * ck;
+    col[j] += p * scale;
+  }
+  *mass = scale * sm;
+  *cost = scale * sc;
+}
+
+D2GS_VECTOR_CLONES void kernel_row_f32(const float* c, const double* psi, double phi, double inv_eps, std::size_t count,
+                                       float* out) {
+  kernel_row_body(c, psi, phi, inv_eps, count, out);
+}
+D2GS_VECTOR_CLONES void kernel_row_f64(const double* c, const double* psi, double phi, double inv_eps,
+                                       std::size_t count, float* out) {
+  kernel_row_body(c, psi, phi, inv_eps, count, out);
+}
+D2GS_VECTOR_CLONES double kernel_dot(const float* k, const double* v, std::size_t count) {
+  return dot_body(k, v, count);
+}
+D2GS_VECTOR_CLONES void kernel_axpy(const float* const* k, const double* u, std::size_t rows, double* y,
+                                    std::size_t count) {
+  axpy_body(k, u, rows, y, count);
+}
+D2GS_VECTOR_CLONES void plan_row_f32(const float* c, const double* pot, double shift, double inv_eps,
+                                     std::size_t count, double* col, double* mass, double* cost) {
+  plan_row_body(c, pot, shift, inv_eps, count, col, mass, cost);
+}
+D2GS_VECTOR_CLONES void plan_row_f64(const double* c, const double* pot, double shift, double inv_eps,
+                                     std::size_t count, double* col, double* mass, double* cost) {
+  plan_row_body(c, pot, shift, inv_eps, count, col, mass, cost);
+}
+D2GS_VECTOR_CLONES double kernel_row_exact_f32(const float* c, const double* psi, double log_a, double inv_eps,
+                                               std::size_t count, float* out) {
+  return kernel_row_exact_body(c, psi, log_a, inv_eps, count, out);
+}
+D2GS_VECTOR_CLONES double kernel_row_exact_f64(const double* c, const double* psi, double log_a, double inv_eps,
+                                               std::size_t count, float* out) {
+  return kernel_row_exact_body(c, psi, log_a, inv_eps, count, out);
+}
+double kernel_row_exact(CostSpan span, const double* psi, double log_a, double inv_eps, std::size_t count, float* out) {
+  return span.f32 ? kernel_row_exact_f32(span.f32, psi, log_a, inv_eps, count, out)
+                  : kernel_row_exact_f64(span.f64, psi, log_a, inv_eps, count, out);
+}
+void kernel_row(CostSpan span, const double* psi, double phi, double inv_eps, std::size_t count, float* out) {
+  if (span.f32) kernel_row_f32(span.f32, psi, phi, inv_eps, count, out);
+  else kernel_row_f64(span.f64, psi, phi, inv_eps, count, out);
+}
+void plan_row(CostSpan span, const double* pot, double shift, double inv_eps, std::size_t count, double* col,
+              double* mass, double* cost) {
+  if (span.f32) plan_row_f32(span.f32, pot, shift, inv_eps, count, col, mass, cost);
+  else plan_row_f64(span.f64, pot, shift, inv_eps, count, col, mass, cost);
+}
+
 // One scratch row per thread, sized for either orientation.
 struct Scratch {
   std::vector<std::vector<double>> buffers;
@@ -265,9 +473,10 @@ double log_sum_exp(const double* c, const double* pot, double inv_eps, std::size
 // ---- stored cost ----
 
 template <class T>
-DenseCostMatrix<T>::DenseCostMatrix(std::size_t n, std::size_t m, std::vector<T> row_major)
+DenseCostMatrix<T>::DenseCostMatrix(std::size_t n, std::size_t m, std::vector<T> row_major, bool with_columns)
     : n_(n), m_(m), by_row_(std::move(row_major)) {
   if (by_row_.size() != n * m) fail("cost matrix: {} values for a {} x {} matrix", by_row_.size(), n, m);
+  if (!with_columns) return;
   by_col_.resize(n * m);
   constexpr std::size_t kBlock = 64;
   const auto blocks = static_cast<std::int64_t>((m + kBlock - 1) / kBlock);
@@ -291,15 +500,20 @@ CostSpan DenseCostMatrix<T>::row(std::size_t i, double*) const {
 }
 
 template <class T>
-CostSpan DenseCostMatrix<T>::column(std::size_t j, double*) const {
+CostSpan DenseCostMatrix<T>::column(std::size_t j, double* scratch) const {
   CostSpan s;
+  if (by_col_.empty() && !by_row_.empty()) {  // rows only: gather (strided)
+    for (std::size_t i = 0; i < n_; ++i) scratch[i] = static_cast<double>(by_row_[i * m_ + j]);
+    s.f64 = scratch;
+    return s;
+  }
   if constexpr (std::is_same_v<T, float>) s.f32 = by_col_.data() + j * n_;
   else s.f64 = by_col_.data() + j * n_;
   return s;
 }
 
 template <class T>
-DenseCostMatrix<T> store_cost(const CostMatrix& cost) {
+DenseCostMatrix<T> store_cost(const CostMatrix& cost, bool with_columns) {
   const std::size_t n = cost.rows(), m = cost.cols();
   std::vector<T> values(n * m);
   Scratch scratch(omp_get_max_threads(), std::max(n, m));
@@ -313,13 +527,21 @@ DenseCostMatrix<T> store_cost(const CostMatrix& cost) {
     else
       for (std::size_t j = 0; j < m; ++j) out[j] = static_cast<T>(s.f64[j]);
   }
-  return DenseCostMatrix<T>(n, m, std::move(values));
+  return DenseCostMatrix<T>(n, m, std::move(values), with_columns);
 }
 
 template class DenseCostMatrix<float>;
 template class DenseCostMatrix<double>;
-template DenseCostMatrix<float> store_cost<float>(const CostMatrix&);
-template DenseCostMatrix<double> store_cost<double>(const CostMatrix&);
+template DenseCostMatrix<float> store_cost<float>(const CostMatrix&, bool);
+template DenseCostMatrix<double> store_cost<double>(const CostMatrix&, bool);
+
+const char* to_string(SinkhornMethod method) {
+  switch (method) {
+    case SinkhornMethod::LogDomain: return "log-domain";
+    case SinkhornMethod::StabilizedKernel: return "kernel";
+  }
+  return "?";
+}
 
 // ---- the solver ----
 
@@ -468,6 +690,249 @@ private:
   std::vector<double> previous_g_, previous_f_, f_, best_g_;
 };
 
+namespace {
+
+// Rows per chunk of the transposed product Kᵀu: each chunk sums its rows into its own column accumulator (in row
+// order), and the chunks are added in chunk order, so the sums do not depend on the thread count.
+constexpr std::size_t kChunkRows = 256;
+constexpr std::size_t kRowBlock = 4;  // rows per fused dot / axpy block (bitwise the same as one at a time)
+
+void kernel_row_precise(CostSpan span, const double* psi, double phi, double inv_eps, std::size_t count, float* out) {
+  for (std::size_t j = 0; j < count; ++j) {
+    const double c = span.f32 ? static_cast<double>(span.f32[j]) : span.f64[j];
+    const double x = psi[j] - c * inv_eps + phi;
+    out[j] = x < -87.0 ? 0.0f : static_cast<float>(std::exp(std::min(x, 88.0)));
+  }
+}
+
+void plan_row_precise(CostSpan span, const double* pot, double shift, double inv_eps, std::size_t count, double* col,
+                      double* mass, double* cost) {
+  double m = -std::numeric_limits<double>::infinity();
+  for (std::size_t j = 0; j < count; ++j)
+    m = std::max(m, pot[j] - (span.f32 ? static_cast<double>(span.f32[j]) : span.f64[j]) * inv_eps);
+  *mass = *cost = 0.0;
+  if (!std::isfinite(m)) return;
+  const double scale = std::exp(shift + m);
+  double sm = 0.0, sc = 0.0;
+  for (std::size_t j = 0; j < count; ++j) {
+    const double c = span.f32 ? static_cast<double>(span.f32[j]) : span.f64[j];
+    const double p = std::exp(pot[j] - c * inv_eps - m);
+    sm += p;
+    sc += p * c;
+    col[j] += p * scale;
+  }
+  *mass = scale * sm;
+  *cost = scale * sc;
+}
+
+// The stabilised-kernel solver (SinkhornMethod::StabilizedKernel; see the header). State: the absolute
+// log-potentials φ (after the row update) and ψ, the kernel's potentials φ̂ (per row) and ψ̂ (per column), and
+// v = exp(ψ − ψ̂). Each iteration, in one pass over K by chunks of rows: s_i = (K v)_i, u_i = a_i / s_i,
+// φ_i = φ̂_i + log u_i, y += u_i K_i (the chunk's accumulator); then v_j = b_j / y_j, ψ_j = ψ̂_j + log v_j. It is
+// the log-domain iteration written with scalings: the same map, the same fixed point, the same stopping rule.
+SinkhornResult sinkhorn_kernel(std::span<const double> a, std::span<const double> b, const std::vector<double>& log_a,
+                               const std::vector<double>& log_b, const CostMatrix& cost, const SinkhornOptions& options,
+                               int threads, const std::vector<double>& epsilons) {
+  const std::size_t n = cost.rows(), m = cost.cols();
+  const bool precise = options.double_exp;
+  const double tau = options.absorb_threshold;
+  if (!(tau > 0.0 && tau <= 30.0)) fail("sinkhorn: absorb threshold must be in (0, 30], got {}", tau);
+  const std::size_t chunks = (n + kChunkRows - 1) / kChunkRows;
+  std::vector<float> kernel(n * m);
+  std::vector<double> acc(chunks * m);
+  std::vector<double> phi(n, 0.0), psi(m, 0.0), phi_hat(n, 0.0), psi_hat(m, 0.0), v(m, 1.0);
+  std::vector<double> dphi(n, 0.0), dpsi(m, 0.0), psi_next(m, 0.0), u(n, 1.0);
+  std::vector<unsigned char> refreshed(n, 0), bad_column(m, 0);
+  Scratch scratch(threads, std::max(n, m));
+  Anderson anderson(static_cast<std::size_t>(std::max(0, options.anderson_depth)), m);
+  SinkhornResult result;
+  const auto sm = static_cast<std::int64_t>(m), sn = static_cast<std::int64_t>(n);
+
+  // Whole kernel from the current ψ: ψ̂ = ψ, v = 1, and φ̂ the exact row update from ψ (what the next iteration's
+  // row half computes; φ itself is left as it is so that the next iteration measures its change), so that u = 1
+  // up to rounding. One exp per entry.
+  const auto absorb = [&](double inv_eps) {
+    psi_hat = psi;
+    std::fill(v.begin(), v.end(), 1.0);
+#pragma omp parallel for schedule(dynamic, 16) num_threads(threads)
+    for (std::int64_t si = 0; si < sn; ++si) {
+      const auto i = static_cast<std::size_t>(si);
+      const CostSpan row = cost.row(i, scratch.get());
+      float* k = kernel.data() + i * m;
+      if (precise) {
+        phi_hat[i] = log_a[i] - lse(row, psi.data(), inv_eps, m, true, std::numeric_limits<double>::quiet_NaN());
+        kernel_row_precise(row, psi_hat.data(), phi_hat[i], inv_eps, m, k);
+      } else {
+        phi_hat[i] = kernel_row_exact(row, psi_hat.data(), log_a[i], inv_eps, m, k);
+      }
+    }
+  };
+
+  double eps_prev = epsilons.front();
+  for (const double eps : epsilons) {
+    const auto stage_start = std::chrono::steady_clock::now();
+    const bool last_stage = eps == epsilons.back();
+    const double inv_eps = 1.0 / eps;
+    const double tolerance = last_stage ? options.tolerance : std::max(options.tolerance, options.stage_tolerance);
+    const double rescale = eps_prev / eps;  // keep f = εφ, g = εψ across stages
+    for (auto& x : phi) x *= rescale;
+    for (auto& x : psi) x *= rescale;
+    eps_prev = eps;
+    result.converged = false;
+    SinkhornStage stage;
+    stage.epsilon = eps;
+    absorb(inv_eps);
+    ++stage.absorptions;
+    bool accelerate = options.anderson_depth > 0;
+    const int max_restarts = options.anderson_max_restarts < 0 ? std::numeric_limits<int>::max()
+                                                               : options.anderson_max_restarts;
+    anderson.reset();
+    while (result.iterations < options.max_iterations) {
+      // Rows (u, φ) and the chunks of Kᵀu.
+#pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
+      for (std::int64_t sc = 0; sc < static_cast<std::int64_t>(chunks); ++sc) {
+        const auto c = static_cast<std::size_t>(sc);
+        const std::size_t i0 = c * kChunkRows, i1 = std::min(n, i0 + kChunkRows);
+        double* y = acc.data() + c * m;
+        std::fill(y, y + m, 0.0);
+        for (std::size_t b0 = i0; b0 < i1; b0 += kRowBlock) {
+          const std::size_t b1 = std::min(i1, b0 + kRowBlock);
+          const float* rows[kRowBlock];
+          double scal[kRowBlock];
+          for (std::size_t i = b0; i < b1; ++i) {
+            float* k = kernel.data() + i * m;
+            const double s = kernel_dot(k, v.data(), m);
+            double updated = 0.0;
+            const double log_u = std::log(a[i] / s);
+            if (s > 0.0 && std::abs(log_u) <= tau) {
+              u[i] = a[i] / s;
+              updated = phi_hat[i] + log_u;
+              refreshed[i] = 0;
+            } else {
+              // Scaling out of range (or an empty kernel row): exact log-domain update of this row, and its kernel
+              // row recomputed with φ̂_i = φ_i (u_i = 1).
+              const CostSpan row = cost.row(i, scratch.get());
+              updated = log_a[i] - lse(row, psi.data(), inv_eps, m, precise, std::numeric_limits<double>::quiet_NaN());
+              phi_hat[i] = updated;
+              if (precise) kernel_row_precise(row, psi_hat.data(), updated, inv_eps, m, k);
+              else kernel_row(row, psi_hat.data(), updated, inv_eps, m, k);
+              u[i] = 1.0;
+              refreshed[i] = 1;
+            }
+            dphi[i] = std::abs(updated - phi[i]);
+            phi[i] = updated;
+            rows[i - b0] = k;
+            scal[i - b0] = u[i];
+          }
+          kernel_axpy(rows, scal, b1 - b0, y, m);
+        }
+      }
+      // Columns: sum the chunks in order, v_j = b_j / (Kᵀu)_j.
+#pragma omp parallel for schedule(static) num_threads(threads)
+      for (std::int64_t sj = 0; sj < sm; ++sj) {
+        const auto j = static_cast<std::size_t>(sj);
+        double y = 0.0;
+        for (std::size_t c = 0; c < chunks; ++c) y += acc[c * m + j];
+        bad_column[j] = !(y > 0.0) || !std::isfinite(y);
+        psi_next[j] = bad_column[j] ? 0.0 : psi_hat[j] + std::log(b[j] / y);
+      }
+      // An empty kernel column (every entry below e^−87): the exact log-domain update of that column.
+      std::vector<std::int64_t> bad;
+      for (std::size_t j = 0; j < m; ++j)
+        if (bad_column[j]) bad.push_back(static_cast<std::int64_t>(j));
+      if (!bad.empty()) {
+#pragma omp parallel for schedule(dynamic, 4) num_threads(threads)
+        for (std::int64_t k = 0; k < static_cast<std::int64_t>(bad.size()); ++k) {
+          const auto j = static_cast<std::size_t>(bad[static_cast<std::size_t>(k)]);
+          psi_next[j] = log_b[j] - lse(cost.column(j, scratch.get()), phi.data(), inv_eps, n, precise,
+                                       std::numeric_limits<double>::quiet_NaN());
+        }
+      }
+      for (std::size_t j = 0; j < m; ++j) dpsi[j] = std::abs(psi_next[j] - psi[j]);
+      for (const unsigned char r : refreshed) stage.row_refreshes += r;
+      ++result.iterations;
+      ++stage.iterations;
+      double change = 0.0;
+      for (const double d : dphi) change = std::max(change, d);
+      for (const double d : dpsi) change = std::max(change, d);
+      if (!std::isfinite(change)) fail("sinkhorn: the potentials diverged (non-finite values) at iteration {}", result.iterations);
+      result.last_change = change;
+      if (options.on_iteration) options.on_iteration(result.iterations, change, tolerance);
+      bool done = false;
+      if (change < tolerance) {
+        if (accelerate && last_stage) {
+          accelerate = false;  // the solve ends on plain iterations: the plain solver's stopping rule
+          psi.swap(psi_next);
+        } else {
+          psi.swap(psi_next);
+          result.converged = true;
+          done = true;
+        }
+      } else if (accelerate) {
+        ++stage.accelerated;
+        const int restarts = anderson.restarts();
+        anderson.step(psi, psi_next);
+        stage.restarts += anderson.restarts() - restarts;
+        if (stage.restarts >= max_restarts) accelerate = false;
+      } else {
+        psi.swap(psi_next);
+      }
+      if (done) break;
+      // New column scalings; recompute the kernel when one leaves [e^−τ, e^τ].
+      bool out_of_range = !bad.empty();
+      for (std::size_t j = 0; j < m; ++j) {
+        const double log_v = psi[j] - psi_hat[j];
+        out_of_range = out_of_range || !(std::abs(log_v) <= tau);
+        v[j] = std::exp(log_v);
+      }
+      if (out_of_range) {
+        absorb(inv_eps);
+        ++stage.absorptions;
+      }
+    }
+    stage.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - stage_start).count();
+    result.stages.push_back(stage);
+    if (!result.converged) break;
+  }
+  result.epsilon = eps_prev;
+  kernel.clear();
+  kernel.shrink_to_fit();
+
+  // Plan marginals and transport cost with the final potentials, by rows (column masses by chunks, in order).
+  const double inv_eps = 1.0 / eps_prev;
+  std::vector<double> row_mass(n), row_cost(n);
+#pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
+  for (std::int64_t sc = 0; sc < static_cast<std::int64_t>(chunks); ++sc) {
+    const auto c = static_cast<std::size_t>(sc);
+    double* y = acc.data() + c * m;
+    std::fill(y, y + m, 0.0);
+    for (std::size_t i = c * kChunkRows; i < std::min(n, (c + 1) * kChunkRows); ++i) {
+      const CostSpan row = cost.row(i, scratch.get());
+      if (precise) plan_row_precise(row, psi.data(), phi[i], inv_eps, m, y, &row_mass[i], &row_cost[i]);
+      else plan_row(row, psi.data(), phi[i], inv_eps, m, y, &row_mass[i], &row_cost[i]);
+    }
+  }
+  double total = 0.0, error = 0.0;
+  for (std::size_t i = 0; i < n; ++i) {
+    total += row_cost[i];
+    error += std::abs(row_mass[i] - a[i]);
+  }
+  for (std::size_t j = 0; j < m; ++j) {
+    double y = 0.0;
+    for (std::size_t c = 0; c < chunks; ++c) y += acc[c * m + j];
+    error += std::abs(y - b[j]);
+  }
+  result.transport_cost = total;
+  result.marginal_error = error;
+  result.f.resize(n);
+  result.g.resize(m);
+  for (std::size_t i = 0; i < n; ++i) result.f[i] = eps_prev * phi[i];
+  for (std::size_t j = 0; j < m; ++j) result.g[j] = eps_prev * psi[j];
+  return result;
+}
+
+}  // namespace
+
 SinkhornResult sinkhorn(std::span<const double> a, std::span<const double> b, const CostMatrix& cost,
                         const SinkhornOptions& options) {
   const std::size_t n = cost.rows(), m = cost.cols();
@@ -502,6 +967,8 @@ SinkhornResult sinkhorn(std::span<const double> a, std::span<const double> b, co
     for (; e > options.epsilon * (1.0 + 1e-9); e *= options.epsilon_factor) epsilons.push_back(e);
   }
   epsilons.push_back(options.epsilon);
+  if (options.method == SinkhornMethod::StabilizedKernel)
+    return sinkhorn_kernel(a, b, log_a, log_b, cost, options, threads, epsilons);
 
   SinkhornResult result;
   std::vector<double> phi(n, 0.0), psi(m, 0.0), dphi(n, 0.0), dpsi(m, 0.0), psi_next(m, 0.0);
@@ -525,7 +992,8 @@ SinkhornResult sinkhorn(std::span<const double> a, std::span<const double> b, co
     // Anderson acceleration in this stage until, in the last stage, an iteration has reached the tolerance;
     // then plain iterations decide the stop.
     bool accelerate = options.anderson_depth > 0;
-    constexpr int kMaxRestarts = 5;
+    const int max_restarts = options.anderson_max_restarts < 0 ? std::numeric_limits<int>::max()
+                                                               : options.anderson_max_restarts;
     anderson.reset();
     while (result.iterations < options.max_iterations) {
 #pragma omp parallel num_threads(threads)
@@ -574,7 +1042,7 @@ SinkhornResult sinkhorn(std::span<const double> a, std::span<const double> b, co
         stage.restarts += anderson.restarts() - restarts;
         // Extrapolation keeps failing in this stage: plain iterations for the rest of it (never much worse
         // than the plain solver).
-        if (stage.restarts >= kMaxRestarts) accelerate = false;
+        if (stage.restarts >= max_restarts) accelerate = false;
       } else {
         psi.swap(psi_next);
       }

@@ -47,8 +47,10 @@ template <class T>
 class DenseCostMatrix final : public CostMatrix {
 public:
   DenseCostMatrix() = default;
-  // `row_major` holds n · m values, C_ij at i · m + j.
-  DenseCostMatrix(std::size_t n, std::size_t m, std::vector<T> row_major);
+  // `row_major` holds n · m values, C_ij at i · m + j. Without `with_columns` only the row-major copy is kept
+  // (n · m · sizeof(T) bytes) and column() gathers a column into the scratch buffer (strided reads): enough for
+  // the stabilised-kernel solver, which reads the cost by rows.
+  DenseCostMatrix(std::size_t n, std::size_t m, std::vector<T> row_major, bool with_columns = true);
   std::size_t rows() const override { return n_; }
   std::size_t cols() const override { return m_; }
   CostSpan row(std::size_t i, double* scratch) const override;
@@ -60,9 +62,23 @@ private:
   std::vector<T> by_row_, by_col_;
 };
 
-// Evaluates every entry of `cost` once (rows in parallel) and stores it.
+// Evaluates every entry of `cost` once (rows in parallel) and stores it (both orientations, or rows only).
 template <class T>
-DenseCostMatrix<T> store_cost(const CostMatrix& cost);
+DenseCostMatrix<T> store_cost(const CostMatrix& cost, bool with_columns = true);
+
+// How the iterations are evaluated (both solve the same problem with the same stopping rule):
+// - LogDomain: every half-iteration a log-sum-exp over the cost (one float exp per entry), reading rows for φ and
+//   columns for ψ.
+// - StabilizedKernel: the scaling form (Schmitzer 2019, "Stabilized sparse scaling algorithms for entropy
+//   regularized transport problems"): K_ij = exp(φ̂_i + ψ̂_j − C_ij/ε) is stored in float once per absorption
+//   (n · m · 4 bytes) and an iteration is u_i = a_i / (K v)_i, v_j = b_j / (Kᵀ u)_j, both products in one pass
+//   over K (no exp); φ = φ̂ + log u, ψ = ψ̂ + log v. A row whose scaling leaves [e^−τ, e^τ] (τ =
+//   absorb_threshold) is updated exactly (log-sum-exp over its cost row) and its kernel row recomputed; when a
+//   column scaling leaves that range, or at each ε stage, the whole kernel is recomputed (an "absorption").
+//   Kernel entries below e^−87 are 0 (no subnormals): with scalings within e^±τ the omitted plan entries are
+//   below e^(2τ−87). Reads the cost by rows only.
+enum class SinkhornMethod { LogDomain, StabilizedKernel };
+const char* to_string(SinkhornMethod method);
 
 struct SinkhornOptions {
   double epsilon = 0.1;         // ε, in the cost's units (POT's reg)
@@ -92,6 +108,10 @@ struct SinkhornOptions {
   // iteration changes the potentials by less than `tolerance`, the solve goes on with plain iterations until one
   // of them does too: the stopping rule of the plain solver.
   int anderson_depth = 0;
+  // Safeguard restarts after which a stage goes on with plain iterations (< 0: no limit).
+  int anderson_max_restarts = 5;
+  SinkhornMethod method = SinkhornMethod::LogDomain;
+  double absorb_threshold = 20.0;  // τ of the stabilised-kernel solver (log-scalings), in (0, 30]
 };
 
 // One ε stage of a solve (diagnostics).
@@ -100,6 +120,8 @@ struct SinkhornStage {
   int iterations = 0;
   int accelerated = 0;   // of which followed by an Anderson step
   int restarts = 0;      // Anderson restarts by the safeguard
+  int absorptions = 0;   // stabilised kernel: whole-kernel recomputations (one exp per entry each)
+  long long row_refreshes = 0;  // stabilised kernel: rows updated exactly and recomputed
   double seconds = 0.0;
 };
 
