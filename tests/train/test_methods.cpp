@@ -8,11 +8,13 @@
 #include <functional>
 
 #include "d2gs/core/error.hpp"
+#include "d2gs/core/npy.hpp"
 #include "d2gs/core/random.hpp"
 #include "d2gs/render/rasterizer.hpp"
 #include "d2gs/train/dropout.hpp"
 #include "d2gs/train/losses.hpp"
 #include "d2gs/train/methods/method.hpp"
+#include "d2gs/train/view_map.hpp"
 #include "test_errors.hpp"
 #include "test_paths.hpp"
 
@@ -186,6 +188,40 @@ TEST(Methods, D2gsChecksItsCheckpointState) {
 }
 
 // ---- regularisers (--regularisers): components stacked on any method ----
+
+// The per-view maps of D²GS's DAFE priors and of stereo-depth (train/view_map.hpp): DIR/NAME.npy at the
+// view's size, 0 kept out of the average where it means "no value", and errors that name the file.
+TEST(Methods, ViewMapsAreReadAtTheViewsSizeAndErrorsNameTheFile) {
+  const auto dir = test::scratch_dir();
+  Camera cam;
+  cam.image_name = "view.png";
+  cam.width = 2;
+  cam.height = 1;
+  // 2 rows × 4 columns: the left output pixel covers {1, 0, 1, 0}, the right one {3, 3, 3, 3}.
+  write_npy_f32(dir / "view.npy", {2, 4}, {1, 0, 3, 3, 1, 0, 3, 3});
+  EXPECT_EQ(read_view_map(dir, cam, {.what = "prior", .shape = "map"}).pixels, (std::vector<float>{0.5f, 3.0f}));
+  EXPECT_EQ(read_view_map(dir, cam, {.what = "prior", .shape = "map", .zero_is_none = true}).pixels,
+            (std::vector<float>{1.0f, 3.0f}));
+  Camera full = cam;
+  full.width = 4;
+  full.height = 2;
+  const Image same = read_view_map(dir, full, {.what = "prior", .shape = "map", .zero_is_none = true});
+  EXPECT_EQ(same.width, 4);
+  EXPECT_EQ(same.height, 2);
+  EXPECT_EQ(same.pixels, (std::vector<float>{1, 0, 3, 3, 1, 0, 3, 3}));
+
+  const std::string file = (dir / "view.npy").string();
+  write_npy_f32(dir / "view.npy", {2, 4}, {1, 0, -1, 3, 1, 0, 3, 3});
+  EXPECT_EQ(test::error_of([&] { read_view_map(dir, full, {.what = "d", .shape = "depth map", .check_depths = true}); }),
+            file + ": depth -1 at pixel 2 is not a depth (≥ 0, 0 = none)");
+  EXPECT_EQ(read_view_map(dir, full, {.what = "prior", .shape = "map"}).pixels[2], -1.0f);
+  write_npy_f32(dir / "view.npy", {8}, {1, 0, 3, 3, 1, 0, 3, 3});
+  EXPECT_EQ(test::error_of([&] { read_view_map(dir, cam, {.what = "stereo depth", .shape = "depth map"}); }),
+            file + ": expected an H×W depth map, got 1 dimensions");
+  cam.image_name = "other.jpg";
+  EXPECT_EQ(test::error_of([&] { read_view_map(dir, cam, {.what = "DAFE prior", .shape = "map"}); }),
+            (dir / "other.npy").string() + ": DAFE prior missing for training view other.jpg");
+}
 
 TEST(Regularisers, RegistryAndNames) {
   ASSERT_EQ(training_regularisers().size(), 3u);

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <fstream>
 #include <map>
+#include <memory>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -39,6 +40,46 @@ TrainConfig fern_config(const fs::path& out, const std::string& method, int iter
   // and in tests/geometry).
   c.init_dense_method = "sgbm";
   return c;
+}
+
+// Every parameter of the two models, bit for bit.
+void expect_same_model(const Gaussians& got, const Gaussians& want) {
+  EXPECT_EQ(got.size(), want.size());
+  EXPECT_EQ(got.means, want.means);
+  EXPECT_EQ(got.log_scales, want.log_scales);
+  EXPECT_EQ(got.quats, want.quats);
+  EXPECT_EQ(got.opacity_logits, want.opacity_logits);
+  EXPECT_EQ(got.sh_dc, want.sh_dc);
+  EXPECT_EQ(got.sh_rest, want.sh_rest);
+}
+
+// The runs of a regulariser test: `cfg` trained in DIR/a with a checkpoint at iteration `resume_at`; the
+// same run resumed from that checkpoint in DIR/b, which must end in DIR/a's model bit for bit (a
+// regulariser that loses state on resume fails here); and the same run without regularisers in DIR/c.
+struct RegularisedAndPlain {
+  std::unique_ptr<Trainer> regularised;  // DIR/a
+  std::unique_ptr<Trainer> plain;        // DIR/c
+};
+RegularisedAndPlain train_resume_and_train_plain(TrainConfig cfg, const fs::path& dir, int resume_at) {
+  RegularisedAndPlain runs;
+  cfg.model_dir = (dir / "a").string();
+  cfg.checkpoint_iterations = {resume_at};
+  runs.regularised = std::make_unique<Trainer>(cfg);
+  runs.regularised->run();
+  auto cfg_b = cfg;
+  cfg_b.model_dir = (dir / "b").string();
+  cfg_b.checkpoint_iterations = {};
+  Trainer b(cfg_b, dir / "a" / fmt::format("chkpnt{}.bin", resume_at));
+  EXPECT_EQ(b.iteration(), resume_at);
+  b.run();
+  expect_same_model(b.model(), runs.regularised->model());
+
+  auto cfg_c = cfg_b;
+  cfg_c.model_dir = (dir / "c").string();
+  cfg_c.regularisers = {};
+  runs.plain = std::make_unique<Trainer>(cfg_c);
+  runs.plain->run();
+  return runs;
 }
 
 TEST(Trainer, TestPsnrRisesWellAboveTheInitialRender) {
@@ -116,25 +157,11 @@ TEST(Trainer, RegularisersTrainAndResumeBitIdentically) {
   cfg.opacity_reset_at = {};
   cfg.regularisers = {"opacity-noise", "opacity-decay"};
   cfg.opacity_decay_factor = 0.95;
-  cfg.checkpoint_iterations = {10};
-  Trainer a(cfg);
-  a.run();
-  auto cfg_b = cfg;
-  cfg_b.model_dir = (dir / "b").string();
-  cfg_b.checkpoint_iterations = {};
-  Trainer b(cfg_b, dir / "a/chkpnt10.bin");
-  b.run();
-  EXPECT_EQ(b.model().means, a.model().means);
-  EXPECT_EQ(b.model().opacity_logits, a.model().opacity_logits);
-  EXPECT_EQ(b.model().sh_dc, a.model().sh_dc);
+  const auto runs = train_resume_and_train_plain(cfg, dir, 10);
+  const Trainer& a = *runs.regularised;
+  const Trainer& c = *runs.plain;
   const auto saved = nlohmann::json::parse(read_file(dir / "a/config.json"));
   EXPECT_EQ(saved["regularisers"], nlohmann::json({"opacity-noise", "opacity-decay"}));
-
-  auto cfg_c = cfg_b;
-  cfg_c.model_dir = (dir / "c").string();
-  cfg_c.regularisers = {};
-  Trainer c(cfg_c);
-  c.run();
   ASSERT_NE(c.model().means, a.model().means);
   const auto mean_opacity = [](const Gaussians& g) {
     double sum = 0;
@@ -176,16 +203,7 @@ TEST(Trainer, StereoDepthPullsTheRenderTowardsTheStereoDepth) {
   cfg.init = "sparse";  // a cloud whose depth the stereo maps can still improve
   cfg.regularisers = {"stereo-depth"};
   cfg.stereo_depth_lambda = 0.5;
-  cfg.checkpoint_iterations = {20};
-  Trainer a(cfg);
-  a.run();
-  auto cfg_b = cfg;
-  cfg_b.model_dir = (dir / "b").string();
-  cfg_b.checkpoint_iterations = {};
-  Trainer b(cfg_b, dir / "a/chkpnt20.bin");
-  b.run();
-  EXPECT_EQ(b.model().means, a.model().means);
-  EXPECT_EQ(b.model().opacity_logits, a.model().opacity_logits);
+  const auto runs = train_resume_and_train_plain(cfg, dir, 20);
   std::ifstream log(dir / "a/train_log.jsonl");
   std::string line;
   int logged = 0;
@@ -198,11 +216,6 @@ TEST(Trainer, StereoDepthPullsTheRenderTowardsTheStereoDepth) {
   }
   EXPECT_GE(logged, 3);
 
-  auto cfg_c = cfg_b;
-  cfg_c.model_dir = (dir / "c").string();
-  cfg_c.regularisers = {};
-  Trainer c(cfg_c);
-  c.run();
   // The loss itself, on every training view of both models, against the maps the run used.
   auto rasterizer = render::make_cpu_rasterizer();
   const auto disparity_error = [&](const Trainer& t) {
@@ -218,7 +231,7 @@ TEST(Trainer, StereoDepthPullsTheRenderTowardsTheStereoDepth) {
     }
     return sum;
   };
-  const double with = disparity_error(a), without = disparity_error(c);
+  const double with = disparity_error(*runs.regularised), without = disparity_error(*runs.plain);
   EXPECT_LT(with, 0.9 * without) << "with stereo-depth " << with << ", without " << without;
 }
 

@@ -16,12 +16,38 @@ struct IsaChoice {
   const TileKernels<float>* kernels = nullptr;
 };
 
+#if defined(D2GS_TILE_ISA_X86)
+// Whether this CPU runs the code built with -march=x86-64-v3 ("avx2") or -march=x86-64-v4 ("avx512") (after
+// __builtin_cpu_init). GCC's __builtin_cpu_supports knows the levels by name. Clang 14's rejects those
+// names ("invalid cpu feature string for builtin") and names only some of v3's features, so with clang a
+// level is the features that it can ask for: AVX2, FMA, BMI1 and BMI2 on top of v2's POPCNT and SSE4.2
+// (the x86 CPUs that have them, Intel from Haswell and AMD from Excavator, also have v3's F16C, LZCNT and
+// MOVBE), and for v4 AVX-512 F, BW, CD, DQ and VL on top.
+bool cpu_runs_x86_64_v3() {
+#if defined(__clang__)
+  return __builtin_cpu_supports("popcnt") && __builtin_cpu_supports("sse4.2") && __builtin_cpu_supports("avx2") &&
+         __builtin_cpu_supports("fma") && __builtin_cpu_supports("bmi") && __builtin_cpu_supports("bmi2");
+#else
+  return __builtin_cpu_supports("x86-64-v3");
+#endif
+}
+
+bool cpu_runs_x86_64_v4() {
+#if defined(__clang__)
+  return cpu_runs_x86_64_v3() && __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512bw") &&
+         __builtin_cpu_supports("avx512cd") && __builtin_cpu_supports("avx512dq") && __builtin_cpu_supports("avx512vl");
+#else
+  return __builtin_cpu_supports("x86-64-v4");
+#endif
+}
+#endif
+
 bool cpu_runs(const std::string& isa) {
   if (isa == "baseline") return true;
 #if defined(D2GS_TILE_ISA_X86)
   __builtin_cpu_init();
-  if (isa == "avx2") return __builtin_cpu_supports("x86-64-v3");
-  if (isa == "avx512") return __builtin_cpu_supports("x86-64-v4");
+  if (isa == "avx2") return cpu_runs_x86_64_v3();
+  if (isa == "avx512") return cpu_runs_x86_64_v4();
 #endif
   return false;
 }

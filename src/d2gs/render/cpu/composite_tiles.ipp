@@ -40,7 +40,7 @@ D2GS_TILE_INLINE V smoothstep_row(V e) {
 }
 template <typename V>
 D2GS_TILE_INLINE V smoothstep_grad_row(V e) {
-  return (e <= 0) | (e >= 1) ? V{} : 6 * e * (1 - e);
+  return ((e <= 0) | (e >= 1)) ? V{} : 6 * e * (1 - e);
 }
 
 // What one Gaussian contributes to a tile, precomputed once per (Gaussian, tile): per column vector dx =

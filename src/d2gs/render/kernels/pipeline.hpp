@@ -245,18 +245,7 @@ public:
     pixel_depth_.resize(pixels);
     final_t_.resize(pixels);
     n_contrib_.resize(pixels);
-    CompositeFwdArgs c;
-    c.width = width;
-    c.height = height;
-    c.tiles_x = out_.tiles_x;
-    c.mean2d = mean2d_.data();
-    c.conic = conic_.data();
-    c.opacity = opacity_.data();
-    c.color = color_.data();
-    c.depth = depth_.data();
-    c.isect_gaussians = gaussians_sorted_.data();
-    c.tile_ranges = ranges_.data();
-    for (int k = 0; k < 3; ++k) c.background[k] = options.background[k];
+    auto c = composite_args<CompositeFwdArgs>();
     c.rgb = rgb_.data();
     c.alpha = alpha_.data();
     c.out_depth = pixel_depth_.data();
@@ -291,18 +280,7 @@ public:
     backend_.zero(d_depth_, n_);
     backend_.zero(d_opacity_, n_);
     backend_.zero(d_color_, n_ * 3);
-    CompositeBwdArgs c;
-    c.width = width;
-    c.height = height;
-    c.tiles_x = out_.tiles_x;
-    c.mean2d = mean2d_.data();
-    c.conic = conic_.data();
-    c.opacity = opacity_.data();
-    c.color = color_.data();
-    c.depth = depth_.data();
-    c.isect_gaussians = gaussians_sorted_.data();
-    c.tile_ranges = ranges_.data();
-    for (int k = 0; k < 3; ++k) c.background[k] = composite_options_.background[k];
+    auto c = composite_args<CompositeBwdArgs>();
     c.clamp_pass_through = composite_options_.clamp_pass_through;
     c.final_t = final_t_.data();
     c.n_contrib = n_contrib_.data();
@@ -326,6 +304,25 @@ public:
   }
 
 private:
+  // What the compositing forward and backward read alike (CompositeFwdArgs, CompositeBwdArgs): the image
+  // and its tiles, the projected Gaussians, their sorted intersections and composite()'s background.
+  template <class Args>
+  Args composite_args() {
+    Args c;
+    c.width = camera_.width;
+    c.height = camera_.height;
+    c.tiles_x = out_.tiles_x;
+    c.mean2d = mean2d_.data();
+    c.conic = conic_.data();
+    c.opacity = opacity_.data();
+    c.color = color_.data();
+    c.depth = depth_.data();
+    c.isect_gaussians = gaussians_sorted_.data();
+    c.tile_ranges = ranges_.data();
+    for (int k = 0; k < 3; ++k) c.background[k] = composite_options_.background[k];
+    return c;
+  }
+
   // Projection and SH backward from the projected gradients in d_mean2d_ ... d_color_.
   const BackwardStages& model_backward() {
     const int n = static_cast<int>(n_);

@@ -8,10 +8,10 @@
 #include <filesystem>
 
 #include "d2gs/core/error.hpp"
-#include "d2gs/core/npy.hpp"
 #include "d2gs/train/dropout.hpp"
 #include "d2gs/train/losses.hpp"
 #include "d2gs/train/methods/method.hpp"
+#include "d2gs/train/view_map.hpp"
 
 namespace d2gs {
 namespace {
@@ -123,23 +123,13 @@ public:
 
 private:
   void load_priors(const MethodRun& run) {
-    const fs::path dir = dafe_.prior;
+    // Depth priors mark pixels without a depth by 0 (d2gs init's stereo depth maps): never far, and
+    // never averaged into the valid depths when the map is resized (PatchMatch's maps are at the scene
+    // folder's highest resolution).
+    const bool depth = dafe_.prior_kind == PriorKind::Depth;
     for (std::size_t k = 0; k < run.split.train.size(); ++k) {
       const Camera& cam = run.scene.cameras[static_cast<std::size_t>(run.split.train[k])];
-      const std::string stem = fs::path(cam.image_name).stem().string();
-      const fs::path npy = dir / (stem + ".npy");
-      if (!fs::exists(npy)) fail_file(npy, "DAFE prior missing for training view {}", cam.image_name);
-      const NpyArray a = read_npy(npy);
-      if (a.shape.size() != 2) fail_file(npy, "expected an H×W map, got {} dimensions", a.shape.size());
-      const int h = static_cast<int>(a.shape[0]), w = static_cast<int>(a.shape[1]);
-      Image prior(w, h, 1);
-      for (std::size_t i = 0; i < a.values.size(); ++i) prior.pixels[i] = static_cast<float>(a.values[i]);
-      // Depth priors mark pixels without a depth by 0 (d2gs init's stereo depth maps): never far, and
-      // never averaged into the valid depths when the map is resized (PatchMatch's maps are at the scene
-      // folder's highest resolution).
-      const bool depth = dafe_.prior_kind == PriorKind::Depth;
-      if (w != cam.width || h != cam.height) prior = depth ? resize_area_nonzero(prior, cam.width, cam.height)
-                                                           : resize_area(prior, cam.width, cam.height);
+      const Image prior = read_view_map(dafe_.prior, cam, {.what = "DAFE prior", .shape = "map", .zero_is_none = depth});
       std::vector<std::uint8_t> valid(prior.pixels.size(), 1);
       if (depth)
         for (std::size_t i = 0; i < valid.size(); ++i) valid[i] = prior.pixels[i] > 0.0f;

@@ -13,10 +13,9 @@
 #include <vector>
 
 #include "d2gs/core/error.hpp"
-#include "d2gs/core/image.hpp"
-#include "d2gs/core/npy.hpp"
 #include "d2gs/train/losses.hpp"
 #include "d2gs/train/methods/method.hpp"
+#include "d2gs/train/view_map.hpp"
 
 namespace d2gs {
 namespace {
@@ -38,20 +37,10 @@ public:
     targets_.assign(run.split.train.size(), {});
     for (std::size_t k = 0; k < run.split.train.size(); ++k) {
       const Camera& cam = run.scene.cameras[static_cast<std::size_t>(run.split.train[k])];
-      const fs::path npy = dir / (fs::path(cam.image_name).stem().string() + ".npy");
-      if (!fs::exists(npy)) fail_file(npy, "stereo depth missing for training view {}", cam.image_name);
-      const NpyArray a = read_npy(npy);
-      if (a.shape.size() != 2) fail_file(npy, "expected an H×W depth map, got {} dimensions", a.shape.size());
-      Image depth(static_cast<int>(a.shape[1]), static_cast<int>(a.shape[0]), 1);
-      for (std::size_t i = 0; i < a.values.size(); ++i) {
-        const double v = a.values[i];
-        if (!std::isfinite(v) || v < 0.0) fail_file(npy, "depth {} at pixel {} is not a depth (≥ 0, 0 = none)", v, i);
-        depth.pixels[i] = static_cast<float>(v);
-      }
       // The maps are at the scene folder's highest resolution; pixels without a depth (0) are never
       // averaged into the valid ones.
-      if (depth.width != cam.width || depth.height != cam.height)
-        depth = resize_area_nonzero(depth, cam.width, cam.height);
+      Image depth = read_view_map(dir, cam, {.what = "stereo depth", .shape = "depth map", .zero_is_none = true,
+                                             .check_depths = true});
       targets_[k] = std::move(depth.pixels);
     }
   }
