@@ -1,9 +1,13 @@
 // D²GS's own stages as kernels against the CPU reference: DD-Drop's probabilities
-// (train/kernels/dd_drop_kernels.hpp) against train/dropout.cpp's dd_drop_probabilities of gaussian_depths:
+// (train/kernels/dd_drop_kernels.hpp) against train/dropout.cpp's dd_drop_probabilities of gaussian_depths,
+// and the DAFE loss with its gradient (train/kernels/dafe_kernels.hpp) against train/losses.cpp's dafe_loss:
 // through the CPU emulator always, on the GPU when there is one.
 //
 // The probabilities are the CPU's arithmetic (train/dd_drop_math.hpp) on the CPU's depths, with the minimum,
 // maximum and tertile thresholds read from the depths' sorted keys where the CPU selects them: bit for bit.
+// The DAFE gradient is the CPU's expression with the same float scale (the masked count is exact): bit for
+// bit, added to what the buffer held. The DAFE value is a double sum of the same float terms in another,
+// fixed order: within 1e-12 relative.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -16,11 +20,13 @@
 #include <glm/gtc/quaternion.hpp>
 
 #include "d2gs/core/error.hpp"
+#include "d2gs/core/image.hpp"
 #include "d2gs/core/random.hpp"
 #include "d2gs/render/cuda/device.hpp"
 #include "d2gs/scene/scene.hpp"
 #include "d2gs/train/dropout.hpp"
 #include "d2gs/train/kernels/optim.hpp"
+#include "d2gs/train/losses.hpp"
 #include "test_paths.hpp"
 
 namespace d2gs::test {
@@ -266,6 +272,124 @@ TEST(DeviceKernels, DdDropProbabilitiesEqualTheCpuBitForBit) {
                             int t, Rng& rng, std::vector<float>& mask, std::vector<float>* p) {
     tk::device_dd_drop_mask(m, c, d, o, t, rng, mask, p);
   }, "device");
+}
+
+// ---- DAFE ----------------------------------------------------------------------------------------------
+
+struct DafeCase {
+  int width = 0, height = 0, channels = 0;
+  std::vector<float> a, b, grad;  // grad: what the buffer holds before DAFE (the L1 and SSIM gradients)
+  std::vector<std::uint8_t> mask;
+};
+
+// A render a near a ground truth b, some values equal (sign 0), a far mask of the given density.
+DafeCase random_case(int width, int height, int channels, double mask_density, unsigned seed) {
+  DafeCase c{width, height, channels, {}, {}, {}, {}};
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  std::normal_distribution<float> g(0.0f, 1e-4f);
+  const std::size_t pixels = static_cast<std::size_t>(width) * height, n = pixels * channels;
+  c.a.resize(n);
+  c.b.resize(n);
+  c.grad.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    c.b[i] = u(rng);
+    c.a[i] = i % 13 == 0 ? c.b[i] : std::clamp(0.7f * c.b[i] + 0.3f * u(rng), 0.0f, 1.0f);
+    c.grad[i] = i % 11 == 0 ? -0.0f : g(rng);
+  }
+  c.mask.resize(pixels);
+  for (auto& m : c.mask) m = u(rng) < mask_density ? static_cast<std::uint8_t>(1 + rng() % 255) : 0;
+  return c;
+}
+
+// Fern's view 0 as the ground truth, a blend of views 0 and 1 as the render, the far mask from view 0's
+// darkness taken as a disparity (the darkest 10 %, as dafe_mask's percentile rule picks).
+DafeCase fern_case() {
+  const auto dir = shared_data() / "nerf_llff_data/fern/images_8";
+  const Image v0 = read_image(dir / "image000.png"), v1 = read_image(dir / "image001.png");
+  DafeCase c{v0.width, v0.height, v0.channels, {}, v0.pixels, std::vector<float>(v0.pixels.size(), 0.0f), {}};
+  c.a.resize(v0.pixels.size());
+  for (std::size_t i = 0; i < c.a.size(); ++i) c.a[i] = std::clamp(0.8f * v0.pixels[i] + 0.25f * v1.pixels[i] - 0.02f, 0.0f, 1.0f);
+  const std::size_t pixels = static_cast<std::size_t>(v0.width) * v0.height;
+  std::vector<float> disparity(pixels);
+  for (std::size_t p = 0; p < pixels; ++p)
+    for (int k = 0; k < v0.channels; ++k) disparity[p] += v0.pixels[p * static_cast<std::size_t>(v0.channels) + static_cast<std::size_t>(k)];
+  c.mask = dafe_mask(disparity, PriorKind::Disparity, DafeMaskRule::Percentile, 10.0);
+  return c;
+}
+
+template <class Loss>
+void expect_dafe_equal(const DafeCase& c, Loss kernel_loss, const std::string& what) {
+  for (auto form : {DafeLossForm::Release, DafeLossForm::Paper})
+    for (bool with_grad : {true, false}) {
+      const std::string at = what + (form == DafeLossForm::Paper ? " paper" : " release") + (with_grad ? "" : " value only");
+      std::vector<float> cpu_grad = c.grad, kernel_grad = c.grad;
+      const float scale = 1.5f;
+      const double cpu = dafe_loss(c.a.data(), c.b.data(), c.width, c.height, c.channels, c.mask, form,
+                                   with_grad ? cpu_grad.data() : nullptr, scale);
+      const double kernel = kernel_loss(c.a.data(), c.b.data(), c.width, c.height, c.channels, c.mask, form,
+                                        with_grad ? kernel_grad.data() : nullptr, scale);
+      EXPECT_NEAR(kernel, cpu, 1e-12 * std::abs(cpu)) << at;
+      if (cpu == 0.0) {
+        EXPECT_EQ(kernel, 0.0) << at;
+      }
+      expect_bit_equal(kernel_grad, cpu_grad, at + " gradient");
+      if (with_grad && cpu != 0.0) {
+        EXPECT_NE(first_difference(cpu_grad, c.grad), -1) << at << ": no gradient added";
+      }
+    }
+}
+
+template <class Loss>
+void expect_random_dafe_equal(Loss kernel_loss, const std::string& what) {
+  const int sizes[][3] = {{37, 23, 3}, {7, 4, 1}, {64, 48, 2}, {120, 90, 3}};
+  unsigned seed = 1;
+  for (const auto& s : sizes)
+    for (double density : {0.0, 0.05, 0.5, 1.0})
+      expect_dafe_equal(random_case(s[0], s[1], s[2], density, seed++), kernel_loss,
+                        what + " " + std::to_string(s[0]) + "x" + std::to_string(s[1]) + "x" + std::to_string(s[2]) +
+                            " mask " + std::to_string(density));
+}
+
+auto emulated_dafe(emulate::Schedule schedule) {
+  return [schedule](const float* a, const float* b, int w, int h, int c, const std::vector<std::uint8_t>& mask,
+                    DafeLossForm form, float* grad, float scale) {
+    return tk::emulated_dafe_loss(a, b, w, h, c, mask, form, grad, scale, schedule);
+  };
+}
+
+TEST(EmulatedKernels, DafeLossEqualsTheCpu) {
+  for (auto schedule : kSchedules) expect_random_dafe_equal(emulated_dafe(schedule), "emulated");
+  const DafeCase c = random_case(8, 8, 3, 0.5, 3);
+  EXPECT_THROW(tk::emulated_dafe_loss(c.a.data(), c.b.data(), 8, 7, 3, c.mask, DafeLossForm::Release), Error);
+}
+
+TEST(EmulatedKernels, DafeLossOnFernEqualsTheCpu) {
+  const DafeCase c = fern_case();
+  ASSERT_EQ(c.width, 504);
+  const auto masked = std::count_if(c.mask.begin(), c.mask.end(), [](std::uint8_t m) { return m != 0; });
+  EXPECT_NEAR(static_cast<double>(masked) / static_cast<double>(c.mask.size()), 0.10, 0.01);
+  for (auto schedule : {emulate::Schedule::Forward, emulate::Schedule::SyncVisibility})
+    expect_dafe_equal(c, emulated_dafe(schedule), "emulated fern");
+}
+
+TEST(DeviceKernels, DafeLossEqualsTheCpu) {
+  if (cuda::device_count() == 0) {
+    const DafeCase c = random_case(8, 8, 3, 0.5, 3);
+    EXPECT_THROW(tk::device_dafe_loss(c.a.data(), c.b.data(), 8, 8, 3, c.mask, DafeLossForm::Release), Error);
+    GTEST_SKIP() << cuda::describe_device();
+  }
+  const auto kernel = [](const float* a, const float* b, int w, int h, int c, const std::vector<std::uint8_t>& mask,
+                         DafeLossForm form, float* grad, float scale) {
+    return tk::device_dafe_loss(a, b, w, h, c, mask, form, grad, scale);
+  };
+  expect_random_dafe_equal(kernel, "device");
+  expect_dafe_equal(fern_case(), kernel, "device fern");
+  // The fixed summation order: the device's value is the emulator's bit for bit.
+  const DafeCase c = fern_case();
+  for (auto form : {DafeLossForm::Release, DafeLossForm::Paper})
+    EXPECT_EQ(kernel(c.a.data(), c.b.data(), c.width, c.height, c.channels, c.mask, form, nullptr, 1.0f),
+              tk::emulated_dafe_loss(c.a.data(), c.b.data(), c.width, c.height, c.channels, c.mask, form));
 }
 
 }  // namespace

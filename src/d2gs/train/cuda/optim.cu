@@ -1,4 +1,4 @@
-// Adam, the L1 and SSIM losses, DD-Drop's probabilities, the dropout masks and the densification
+// Adam, the L1, SSIM and DAFE losses, DD-Drop's probabilities, the dropout masks and the densification
 // statistic kernels on the GPU: the bodies of train/kernels/ through kernel_shell, their host side
 // (train/kernels/*_pipeline.hpp) over device memory and CUB.
 #include "d2gs/render/cuda/device.hpp"
@@ -74,6 +74,13 @@ void device_dd_drop_mask(const Gaussians& model, const Camera& camera, const std
   pipeline.probabilities(model, camera, density_score, options, iteration);
   pipeline.mask(rng, multiplier, options.compensate);
   if (probabilities) *probabilities = pipeline.download();
+}
+
+double device_dafe_loss(const float* a, const float* b, int width, int height, int channels,
+                        const std::vector<std::uint8_t>& mask, DafeLossForm form, float* grad, float scale) {
+  if (cuda::device_count() == 0) fail("CUDA: {}", cuda::describe_device());
+  cuda::DeviceBackend backend;
+  return dafe_loss(backend, a, b, width, height, channels, mask, form, grad, scale);
 }
 
 }  // namespace d2gs::train_kernels

@@ -1,4 +1,4 @@
-// Built when the CUDA backend is off: the GPU versions of the Adam, L1, SSIM, DD-Drop, dropout and
+// Built when the CUDA backend is off: the GPU versions of the Adam, L1, SSIM, DAFE, DD-Drop, dropout and
 // densification kernels report that there is no GPU.
 #include "d2gs/core/error.hpp"
 #include "d2gs/render/cuda/device.hpp"
@@ -36,6 +36,10 @@ std::vector<float> device_dd_drop_probabilities(const Gaussians&, const Camera&,
 }
 void device_dd_drop_mask(const Gaussians&, const Camera&, const std::vector<float>&, const DdDropOptions&, int, Rng&,
                          std::vector<float>&, std::vector<float>*) {
+  fail("CUDA: {}", cuda::describe_device());
+}
+double device_dafe_loss(const float*, const float*, int, int, int, const std::vector<std::uint8_t>&, DafeLossForm,
+                        float*, float) {
   fail("CUDA: {}", cuda::describe_device());
 }
 

@@ -1,4 +1,4 @@
-// Adam, the L1 and SSIM losses, DD-Drop's probabilities, the dropout masks and the densification
+// Adam, the L1, SSIM and DAFE losses, DD-Drop's probabilities, the dropout masks and the densification
 // statistic kernels through the CPU emulator (every build; CI runs them without a GPU).
 #include "d2gs/render/kernels/host_backend.hpp"
 #include "d2gs/train/kernels/optim.hpp"
@@ -68,6 +68,13 @@ void emulated_dd_drop_mask(const Gaussians& model, const Camera& camera, const s
   pipeline.probabilities(model, camera, density_score, options, iteration);
   pipeline.mask(rng, multiplier, options.compensate);
   if (probabilities) *probabilities = pipeline.download();
+}
+
+double emulated_dafe_loss(const float* a, const float* b, int width, int height, int channels,
+                          const std::vector<std::uint8_t>& mask, DafeLossForm form, float* grad, float scale,
+                          render::kernels::emulate::Schedule schedule) {
+  render::kernels::emulate::HostBackend backend{schedule};
+  return dafe_loss(backend, a, b, width, height, channels, mask, form, grad, scale);
 }
 
 }  // namespace d2gs::train_kernels

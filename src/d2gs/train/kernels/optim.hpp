@@ -1,12 +1,13 @@
 #pragma once
 // The training step's kernels outside the rasterizer: Adam (adam_kernels.hpp), the L1 loss with its
-// gradient (l1_kernels.hpp), SSIM with its gradient (ssim_kernels.hpp), DD-Drop's probabilities
-// (dd_drop_kernels.hpp), the dropout masks
+// gradient (l1_kernels.hpp), SSIM with its gradient (ssim_kernels.hpp), DAFE with its gradient
+// (dafe_kernels.hpp), DD-Drop's probabilities (dd_drop_kernels.hpp), the dropout masks
 // (dropout_kernels.hpp) and the densification statistic (densify_kernels.hpp): through the CPU emulator
 // (render/kernels/emulate.hpp) in every build, and on the GPU (train/cuda/optim.cu) when there is one.
-// Same arguments and results as Adam::step, l1_loss, Ssim<float>, dd_drop_probabilities,
+// Same arguments and results as Adam::step, l1_loss, Ssim<float>, dafe_loss, dd_drop_probabilities,
 // dropgaussian_mask, bernoulli_mask and GradientStats::add; host arrays in and out.
 #include <cstddef>
+#include <cstdint>
 #include <vector>
 
 #include "d2gs/core/random.hpp"
@@ -16,6 +17,7 @@
 #include "d2gs/train/adam.hpp"
 #include "d2gs/train/densify.hpp"
 #include "d2gs/train/dropout.hpp"
+#include "d2gs/train/losses.hpp"
 
 namespace d2gs::train_kernels {
 
@@ -52,6 +54,11 @@ void emulated_dd_drop_mask(const Gaussians& model, const Camera& camera, const s
                            const DdDropOptions& options, int iteration, Rng& rng, std::vector<float>& multiplier,
                            std::vector<float>* probabilities = nullptr,
                            render::kernels::emulate::Schedule schedule = render::kernels::emulate::Schedule::Forward);
+// dafe_loss: the value as a fixed-order double sum; grad (if non-null) += scale · d/da, as the CPU adds.
+double emulated_dafe_loss(const float* a, const float* b, int width, int height, int channels,
+                          const std::vector<std::uint8_t>& mask, DafeLossForm form, float* grad = nullptr,
+                          float scale = 1.0f,
+                          render::kernels::emulate::Schedule schedule = render::kernels::emulate::Schedule::Forward);
 // stats.add(grad_mean2d_ndc, radii).
 void emulated_add_gradient_stats(GradientStats& stats, const std::vector<float>& grad_mean2d_ndc,
                                  const std::vector<int>& radii,
@@ -75,5 +82,8 @@ std::vector<float> device_dd_drop_probabilities(const Gaussians& model, const Ca
 void device_dd_drop_mask(const Gaussians& model, const Camera& camera, const std::vector<float>& density_score,
                          const DdDropOptions& options, int iteration, Rng& rng, std::vector<float>& multiplier,
                          std::vector<float>* probabilities = nullptr);
+double device_dafe_loss(const float* a, const float* b, int width, int height, int channels,
+                        const std::vector<std::uint8_t>& mask, DafeLossForm form, float* grad = nullptr,
+                        float scale = 1.0f);
 
 }  // namespace d2gs::train_kernels
