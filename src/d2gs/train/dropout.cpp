@@ -5,6 +5,7 @@
 
 #include "d2gs/core/error.hpp"
 #include "d2gs/geometry/knn.hpp"
+#include "d2gs/train/dd_drop_math.hpp"
 #include "d2gs/train/dropout_math.hpp"
 
 namespace d2gs {
@@ -26,13 +27,27 @@ double dd_drop_rate(const DdDropOptions& o, int iteration) {
   return o.rate_min + (o.rate_max - o.rate_min) * std::min(iteration, T) / static_cast<double>(T);
 }
 
+DdDropTerms dd_drop_terms(const DdDropOptions& o, int iteration) {
+  DdDropTerms terms;
+  terms.weight_depth = o.weight_depth;
+  terms.weight_density = o.weight_density;
+  terms.lambdas[0] = o.lambda_near;
+  terms.lambdas[1] = o.lambda_middle;
+  terms.lambdas[2] = o.lambda_far;
+  terms.rate = dd_drop_rate(o, iteration);
+  terms.use_depth_score = o.use_depth_score;
+  terms.use_density_score = o.use_density_score;
+  terms.use_layers = o.use_layers;
+  return terms;
+}
+
 std::vector<float> minmax(const std::vector<float>& values) {
   std::vector<float> out(values.size(), 0.0f);
   if (values.empty()) return out;
   const auto [lo, hi] = std::minmax_element(values.begin(), values.end());
   const float range = *hi - *lo;
   if (!(range > 0.0f)) return out;
-  for (std::size_t i = 0; i < values.size(); ++i) out[i] = (values[i] - *lo) / range;
+  for (std::size_t i = 0; i < values.size(); ++i) out[i] = minmax_normalised(values[i], *lo, range);
   return out;
 }
 
@@ -42,9 +57,11 @@ std::vector<float> gaussian_depths(const Gaussians& model, const Camera& camera,
   const glm::dvec3 c = camera.center_world();
   // glm is column-major: R[2] is the third column of R_world_to_cam.
   const glm::dvec3 third_column = camera.R_world_to_cam[2];
+  const double centre[3] = {c.x, c.y, c.z}, axis[3] = {third_column.x, third_column.y, third_column.z};
+  const float* m = model.means.data();
   for (std::size_t i = 0; i < n; ++i) {
-    const glm::dvec3 x(model.means[i * 3], model.means[i * 3 + 1], model.means[i * 3 + 2]);
-    d[i] = static_cast<float>(mode == DepthMode::Euclidean ? glm::length(x - c) : glm::dot(x, third_column));
+    d[i] = mode == DepthMode::Euclidean ? dd_drop_depth_euclidean(m[i * 3], m[i * 3 + 1], m[i * 3 + 2], centre)
+                                        : dd_drop_depth_release(m[i * 3], m[i * 3 + 1], m[i * 3 + 2], axis);
   }
   return d;
 }
@@ -55,15 +72,15 @@ std::vector<std::uint8_t> depth_layers(const std::vector<float>& depths) {
   if (n == 0) return layer;
   // The ranks ⌊0.33·N⌋ and ⌊0.67·N⌋ of the sorted depths, by selection (every iteration: a full sort of
   // ~40k depths cost ~2.5 ms); after the first selection everything from k1 on is ≥ it, so k2 ≥ k1 is there.
-  const std::size_t k1 = std::min(n - 1, static_cast<std::size_t>(0.33 * static_cast<double>(n)));
-  const std::size_t k2 = std::min(n - 1, static_cast<std::size_t>(0.67 * static_cast<double>(n)));
+  const auto k1 = static_cast<std::size_t>(tertile_rank(static_cast<long long>(n), kNearTertile));
+  const auto k2 = static_cast<std::size_t>(tertile_rank(static_cast<long long>(n), kFarTertile));
   std::vector<float> work = depths;
   std::nth_element(work.begin(), work.begin() + static_cast<std::ptrdiff_t>(k1), work.end());
   const float t1 = work[k1];
   std::nth_element(work.begin() + static_cast<std::ptrdiff_t>(k1), work.begin() + static_cast<std::ptrdiff_t>(k2),
                    work.end());
   const float t2 = work[k2];
-  for (std::size_t i = 0; i < n; ++i) layer[i] = depths[i] < t1 ? 0 : depths[i] < t2 ? 1 : 2;
+  for (std::size_t i = 0; i < n; ++i) layer[i] = static_cast<std::uint8_t>(depth_layer(depths[i], t1, t2));
   return layer;
 }
 
@@ -79,16 +96,9 @@ std::vector<float> dd_drop_probabilities(const std::vector<float>& depths, const
   if (density_norm.size() != n) fail("DD-Drop: {} density scores for {} Gaussians", density_norm.size(), n);
   const auto depth_norm = minmax(depths);
   const auto layers = depth_layers(depths);
-  const double lambdas[3] = {o.lambda_near, o.lambda_middle, o.lambda_far};
-  const double rate = dd_drop_rate(o, iteration);
+  const DdDropTerms terms = dd_drop_terms(o, iteration);
   std::vector<float> p(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    double s = 0.0;
-    if (o.use_depth_score) s += o.weight_depth * (1.0 - depth_norm[i]);
-    if (o.use_density_score) s += o.weight_density * density_norm[i];
-    const double lambda = o.use_layers ? lambdas[layers[i]] : 1.0;
-    p[i] = static_cast<float>(std::clamp(lambda * s * rate, 0.0, 1.0));
-  }
+  for (std::size_t i = 0; i < n; ++i) p[i] = dd_drop_probability(depth_norm[i], density_norm[i], layers[i], terms);
   return p;
 }
 

@@ -16,6 +16,7 @@
 #include "d2gs/core/random.hpp"
 #include "d2gs/model/gaussians.hpp"
 #include "d2gs/scene/camera.hpp"
+#include "d2gs/train/dd_drop_math.hpp"
 
 namespace d2gs {
 
@@ -47,6 +48,8 @@ struct DdDropOptions {
 
 // r(t) of DD-Drop.
 double dd_drop_rate(const DdDropOptions& options, int iteration);
+// The constants of p_i at an iteration (weights, λs, r(t), switches), as dd_drop_probability takes them.
+DdDropTerms dd_drop_terms(const DdDropOptions& options, int iteration);
 // Min-max normalisation to [0, 1]; a constant input maps to 0.
 std::vector<float> minmax(const std::vector<float>& values);
 // Per-Gaussian depth w.r.t. the camera, by the chosen formula.

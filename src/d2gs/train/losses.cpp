@@ -5,13 +5,9 @@
 
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/percentile.hpp"
+#include "d2gs/train/loss_math.hpp"
 
 namespace d2gs {
-namespace {
-
-inline float sign(float x) { return x > 0.0f ? 1.0f : x < 0.0f ? -1.0f : 0.0f; }
-
-}  // namespace
 
 double l1_loss(const float* a, const float* b, std::size_t count, float* grad, float scale) {
   if (count == 0) return 0.0;
@@ -20,7 +16,7 @@ double l1_loss(const float* a, const float* b, std::size_t count, float* grad, f
   for (std::size_t i = 0; i < count; ++i) {
     const float d = a[i] - b[i];
     sum += std::abs(d);
-    if (grad) grad[i] += g * sign(d);
+    if (grad) grad[i] += g * loss_sign(d);
   }
   return sum / static_cast<double>(count);
 }
@@ -64,16 +60,17 @@ double dafe_loss(const float* a, const float* b, int width, int height, int chan
   double sum = 0.0;
   for (std::size_t p = 0; p < pixels; ++p) {
     if (!mask[p]) continue;
-    for (int c = 0; c < channels; ++c) sum += std::abs(a[p * channels + c] - b[p * channels + c]);
+    for (int c = 0; c < channels; ++c) sum += dafe_term(a[p * channels + c], b[p * channels + c]);
   }
-  const double denom = form == DafeLossForm::Paper ? static_cast<double>(masked)
-                                                   : static_cast<double>(pixels) * channels;
+  const double denom = dafe_denominator(static_cast<double>(masked), static_cast<double>(pixels) * channels,
+                                        form == DafeLossForm::Paper);
   if (denom == 0.0) return 0.0;
   if (grad) {
-    const float g = static_cast<float>(scale / denom);
+    const float g = dafe_gradient_scale(scale, denom);
     for (std::size_t p = 0; p < pixels; ++p) {
       if (!mask[p]) continue;
-      for (int c = 0; c < channels; ++c) grad[p * channels + c] += g * sign(a[p * channels + c] - b[p * channels + c]);
+      for (int c = 0; c < channels; ++c)
+        grad[p * channels + c] += dafe_gradient(g, a[p * channels + c], b[p * channels + c]);
     }
   }
   return sum / denom;

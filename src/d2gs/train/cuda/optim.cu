@@ -1,5 +1,6 @@
-// Adam, the L1 loss, SSIM, the dropout masks and the densification statistic kernels on the GPU: the bodies of train/kernels/ through kernel_shell, the host side
-// of train/kernels/optim_pipeline.hpp over device memory.
+// Adam, the L1, SSIM and DAFE losses, DD-Drop's probabilities, the dropout masks and the densification
+// statistic kernels on the GPU: the bodies of train/kernels/ through kernel_shell, their host side
+// (train/kernels/*_pipeline.hpp) over device memory and CUB.
 #include "d2gs/render/cuda/device.hpp"
 #include "d2gs/render/cuda/device_backend.cuh"
 #include "d2gs/train/kernels/optim.hpp"
@@ -52,6 +53,34 @@ void device_add_gradient_stats(GradientStats& stats, const std::vector<float>& g
   if (cuda::device_count() == 0) fail("CUDA: {}", cuda::describe_device());
   cuda::DeviceBackend backend;
   add_gradient_stats(backend, stats, grad_mean2d_ndc, radii);
+}
+
+std::vector<float> device_dd_drop_probabilities(const Gaussians& model, const Camera& camera,
+                                                const std::vector<float>& density_score, const DdDropOptions& options,
+                                                int iteration) {
+  if (cuda::device_count() == 0) fail("CUDA: {}", cuda::describe_device());
+  cuda::DeviceBackend backend;
+  DdDropPipeline<cuda::DeviceBackend> pipeline(backend);
+  pipeline.probabilities(model, camera, density_score, options, iteration);
+  return pipeline.download();
+}
+
+void device_dd_drop_mask(const Gaussians& model, const Camera& camera, const std::vector<float>& density_score,
+                         const DdDropOptions& options, int iteration, Rng& rng, std::vector<float>& multiplier,
+                         std::vector<float>* probabilities) {
+  if (cuda::device_count() == 0) fail("CUDA: {}", cuda::describe_device());
+  cuda::DeviceBackend backend;
+  DdDropPipeline<cuda::DeviceBackend> pipeline(backend);
+  pipeline.probabilities(model, camera, density_score, options, iteration);
+  pipeline.mask(rng, multiplier, options.compensate);
+  if (probabilities) *probabilities = pipeline.download();
+}
+
+double device_dafe_loss(const float* a, const float* b, int width, int height, int channels,
+                        const std::vector<std::uint8_t>& mask, DafeLossForm form, float* grad, float scale) {
+  if (cuda::device_count() == 0) fail("CUDA: {}", cuda::describe_device());
+  cuda::DeviceBackend backend;
+  return dafe_loss(backend, a, b, width, height, channels, mask, form, grad, scale);
 }
 
 }  // namespace d2gs::train_kernels

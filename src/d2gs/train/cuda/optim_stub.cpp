@@ -1,4 +1,5 @@
-// Built when the CUDA backend is off: the GPU versions of the Adam, L1, SSIM, dropout and densification kernels report that there is no GPU.
+// Built when the CUDA backend is off: the GPU versions of the Adam, L1, SSIM, DAFE, DD-Drop, dropout and
+// densification kernels report that there is no GPU.
 #include "d2gs/core/error.hpp"
 #include "d2gs/render/cuda/device.hpp"
 #include "d2gs/train/kernels/optim.hpp"
@@ -26,6 +27,19 @@ void device_bernoulli_mask(const std::vector<float>&, Rng&, std::vector<float>&,
   fail("CUDA: {}", cuda::describe_device());
 }
 void device_add_gradient_stats(GradientStats&, const std::vector<float>&, const std::vector<int>&) {
+  fail("CUDA: {}", cuda::describe_device());
+}
+
+std::vector<float> device_dd_drop_probabilities(const Gaussians&, const Camera&, const std::vector<float>&,
+                                                const DdDropOptions&, int) {
+  fail("CUDA: {}", cuda::describe_device());
+}
+void device_dd_drop_mask(const Gaussians&, const Camera&, const std::vector<float>&, const DdDropOptions&, int, Rng&,
+                         std::vector<float>&, std::vector<float>*) {
+  fail("CUDA: {}", cuda::describe_device());
+}
+double device_dafe_loss(const float*, const float*, int, int, int, const std::vector<std::uint8_t>&, DafeLossForm,
+                        float*, float) {
   fail("CUDA: {}", cuda::describe_device());
 }
 

@@ -1,4 +1,5 @@
-// Adam, the L1 loss, SSIM, the dropout masks and the densification statistic kernels through the CPU emulator (every build; CI runs them without a GPU).
+// Adam, the L1, SSIM and DAFE losses, DD-Drop's probabilities, the dropout masks and the densification
+// statistic kernels through the CPU emulator (every build; CI runs them without a GPU).
 #include "d2gs/render/kernels/host_backend.hpp"
 #include "d2gs/train/kernels/optim.hpp"
 #include "d2gs/train/kernels/optim_pipeline.hpp"
@@ -47,6 +48,33 @@ void emulated_add_gradient_stats(GradientStats& stats, const std::vector<float>&
                                  const std::vector<int>& radii, render::kernels::emulate::Schedule schedule) {
   render::kernels::emulate::HostBackend backend{schedule};
   add_gradient_stats(backend, stats, grad_mean2d_ndc, radii);
+}
+
+std::vector<float> emulated_dd_drop_probabilities(const Gaussians& model, const Camera& camera,
+                                                  const std::vector<float>& density_score,
+                                                  const DdDropOptions& options, int iteration,
+                                                  render::kernels::emulate::Schedule schedule) {
+  render::kernels::emulate::HostBackend backend{schedule};
+  DdDropPipeline pipeline(backend);
+  pipeline.probabilities(model, camera, density_score, options, iteration);
+  return pipeline.download();
+}
+
+void emulated_dd_drop_mask(const Gaussians& model, const Camera& camera, const std::vector<float>& density_score,
+                           const DdDropOptions& options, int iteration, Rng& rng, std::vector<float>& multiplier,
+                           std::vector<float>* probabilities, render::kernels::emulate::Schedule schedule) {
+  render::kernels::emulate::HostBackend backend{schedule};
+  DdDropPipeline pipeline(backend);
+  pipeline.probabilities(model, camera, density_score, options, iteration);
+  pipeline.mask(rng, multiplier, options.compensate);
+  if (probabilities) *probabilities = pipeline.download();
+}
+
+double emulated_dafe_loss(const float* a, const float* b, int width, int height, int channels,
+                          const std::vector<std::uint8_t>& mask, DafeLossForm form, float* grad, float scale,
+                          render::kernels::emulate::Schedule schedule) {
+  render::kernels::emulate::HostBackend backend{schedule};
+  return dafe_loss(backend, a, b, width, height, channels, mask, form, grad, scale);
 }
 
 }  // namespace d2gs::train_kernels

@@ -1,11 +1,13 @@
 #pragma once
 // The L1 loss and its gradient (train/losses.cpp: l1_loss), one thread per value: grad += scale/count *
-// sign(a - b), and the sum of |a - b| reduced in the block (warp shuffles, then the warp sums in shared
-// memory) and added to the total with one atomic per block. The gradient is the CPU's bit for bit; the sum
-// is in another order (and on the GPU the blocks' atomics in no fixed order), equal to rounding.
+// loss_sign(a - b) (train/loss_math.hpp), and the sum of |a - b| reduced in the block (warp shuffles, then
+// the warp sums in shared memory) and added to the total with one atomic per block. The gradient is the
+// CPU's bit for bit; the sum is in another order (and on the GPU the blocks' atomics in no fixed order),
+// equal to rounding.
 #include <math.h>
 
 #include "d2gs/render/kernels/block.hpp"
+#include "d2gs/train/loss_math.hpp"
 
 namespace d2gs::train_kernels {
 
@@ -22,8 +24,6 @@ struct L1Args {
   double* sum = nullptr;  // += sum of |a - b|
 };
 
-D2GS_HD float l1_sign(float x) { return x > 0.0f ? 1.0f : x < 0.0f ? -1.0f : 0.0f; }
-
 struct L1Kernel {
   struct Shared {
     double warp_sums[kBlockThreads / kWarpSize];
@@ -38,7 +38,7 @@ struct L1Kernel {
       if (i >= a.n) return;
       const float d = a.a[i] - a.b[i];
       s[t] = fabsf(d);
-      if (a.grad) a.grad[i] += a.g * l1_sign(d);
+      if (a.grad) a.grad[i] += a.g * loss_sign(d);
     });
     for (int offset = kWarpSize / 2; offset > 0; offset /= 2) {  // warp sum: lane 0 ends with the total
       b.shfl_down(other, s, offset);

@@ -1,18 +1,23 @@
 #pragma once
 // The training step's kernels outside the rasterizer: Adam (adam_kernels.hpp), the L1 loss with its
-// gradient (l1_kernels.hpp), SSIM with its gradient (ssim_kernels.hpp), the dropout masks
+// gradient (l1_kernels.hpp), SSIM with its gradient (ssim_kernels.hpp), DAFE with its gradient
+// (dafe_kernels.hpp), DD-Drop's probabilities (dd_drop_kernels.hpp), the dropout masks
 // (dropout_kernels.hpp) and the densification statistic (densify_kernels.hpp): through the CPU emulator
 // (render/kernels/emulate.hpp) in every build, and on the GPU (train/cuda/optim.cu) when there is one.
-// Same arguments and results as Adam::step, l1_loss, Ssim<float>, dropgaussian_mask, bernoulli_mask and
-// GradientStats::add; host arrays in and out.
+// Same arguments and results as Adam::step, l1_loss, Ssim<float>, dafe_loss, dd_drop_probabilities,
+// dropgaussian_mask, bernoulli_mask and GradientStats::add; host arrays in and out.
 #include <cstddef>
+#include <cstdint>
 #include <vector>
 
 #include "d2gs/core/random.hpp"
 #include "d2gs/eval/ssim.hpp"
 #include "d2gs/render/kernels/emulate.hpp"
+#include "d2gs/scene/camera.hpp"
 #include "d2gs/train/adam.hpp"
 #include "d2gs/train/densify.hpp"
+#include "d2gs/train/dropout.hpp"
+#include "d2gs/train/losses.hpp"
 
 namespace d2gs::train_kernels {
 
@@ -38,6 +43,22 @@ void emulated_dropgaussian_mask(std::size_t n, double rate, Rng& rng, std::vecto
 void emulated_bernoulli_mask(const std::vector<float>& probabilities, Rng& rng, std::vector<float>& multiplier,
                              bool compensate = false,
                              render::kernels::emulate::Schedule schedule = render::kernels::emulate::Schedule::Forward);
+// dd_drop_probabilities(gaussian_depths(model, camera, options.depth_mode), density_score, options,
+// iteration): the depths, their sort (a stable sort of the keys CUB sorts on the GPU) and p_i.
+std::vector<float> emulated_dd_drop_probabilities(
+    const Gaussians& model, const Camera& camera, const std::vector<float>& density_score, const DdDropOptions& options,
+    int iteration, render::kernels::emulate::Schedule schedule = render::kernels::emulate::Schedule::Forward);
+// Those probabilities, then bernoulli_mask(them, rng, multiplier, options.compensate) from the device's copy
+// (the CPU's draws, rng left where the CPU leaves it); the probabilities too when `probabilities` is set.
+void emulated_dd_drop_mask(const Gaussians& model, const Camera& camera, const std::vector<float>& density_score,
+                           const DdDropOptions& options, int iteration, Rng& rng, std::vector<float>& multiplier,
+                           std::vector<float>* probabilities = nullptr,
+                           render::kernels::emulate::Schedule schedule = render::kernels::emulate::Schedule::Forward);
+// dafe_loss: the value as a fixed-order double sum; grad (if non-null) += scale · d/da, as the CPU adds.
+double emulated_dafe_loss(const float* a, const float* b, int width, int height, int channels,
+                          const std::vector<std::uint8_t>& mask, DafeLossForm form, float* grad = nullptr,
+                          float scale = 1.0f,
+                          render::kernels::emulate::Schedule schedule = render::kernels::emulate::Schedule::Forward);
 // stats.add(grad_mean2d_ndc, radii).
 void emulated_add_gradient_stats(GradientStats& stats, const std::vector<float>& grad_mean2d_ndc,
                                  const std::vector<int>& radii,
@@ -55,5 +76,14 @@ void device_bernoulli_mask(const std::vector<float>& probabilities, Rng& rng, st
                            bool compensate = false);
 void device_add_gradient_stats(GradientStats& stats, const std::vector<float>& grad_mean2d_ndc,
                                const std::vector<int>& radii);
+std::vector<float> device_dd_drop_probabilities(const Gaussians& model, const Camera& camera,
+                                                const std::vector<float>& density_score, const DdDropOptions& options,
+                                                int iteration);
+void device_dd_drop_mask(const Gaussians& model, const Camera& camera, const std::vector<float>& density_score,
+                         const DdDropOptions& options, int iteration, Rng& rng, std::vector<float>& multiplier,
+                         std::vector<float>* probabilities = nullptr);
+double device_dafe_loss(const float* a, const float* b, int width, int height, int channels,
+                        const std::vector<std::uint8_t>& mask, DafeLossForm form, float* grad = nullptr,
+                        float scale = 1.0f);
 
 }  // namespace d2gs::train_kernels

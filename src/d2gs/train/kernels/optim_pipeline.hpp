@@ -1,15 +1,18 @@
 #pragma once
-// The host side of the Adam and L1 kernels over a backend of render/kernels/pipeline.hpp (host vectors and
+// The host side of the Adam, L1 and DAFE kernels over a backend of render/kernels/pipeline.hpp (host vectors and
 // the emulator, or device memory and kernel_shell): written once, run by CI through the emulator.
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <vector>
 
 #include "d2gs/core/error.hpp"
 #include "d2gs/render/kernels/block.hpp"
 #include "d2gs/train/adam.hpp"
 #include "d2gs/train/kernels/adam_kernels.hpp"
+#include "d2gs/train/kernels/dafe_kernels.hpp"
 #include "d2gs/train/kernels/l1_kernels.hpp"
+#include "d2gs/train/losses.hpp"
 
 namespace d2gs::train_kernels {
 
@@ -92,6 +95,64 @@ double l1_loss(Backend& backend, const float* a, const float* b, std::size_t cou
     std::copy(out.begin(), out.end(), grad);
   }
   return backend.read(sum, 0) / static_cast<double>(count);
+}
+
+// dafe_loss(a, b, width, height, channels, mask, form, grad, scale): the value (a fixed-order double sum)
+// and grad += scale · d/da on the masked values.
+template <class Backend>
+double dafe_loss(Backend& backend, const float* a, const float* b, int width, int height, int channels,
+                 const std::vector<std::uint8_t>& mask, DafeLossForm form, float* grad, float scale) {
+  const std::size_t pixels = static_cast<std::size_t>(width) * height;
+  if (mask.size() != pixels) fail("DAFE: mask has {} pixels, image {}x{}", mask.size(), width, height);
+  if (width <= 0 || height <= 0 || channels <= 0) return 0.0;  // no pixels: the CPU's denominator is 0
+  const std::size_t values = pixels * static_cast<std::size_t>(channels);
+  if (values > (std::size_t{1} << 31) - 1) fail("DAFE kernels: {} values exceed the int32 indices", values);
+  const int n = static_cast<int>(values);
+  const int blocks = render::kernels::blocks_for(n);
+  typename Backend::template Array<float> da, db, dg;
+  typename Backend::template Array<std::uint8_t> dm;
+  typename Backend::template Array<double> sums, masked;
+  typename Backend::template Array<DafeTotals> totals;
+  backend.upload(da, a, values);
+  backend.upload(db, b, values);
+  backend.upload(dm, mask.data(), pixels);
+  sums.resize(static_cast<std::size_t>(blocks));
+  masked.resize(static_cast<std::size_t>(blocks));
+  totals.resize(1);
+  DafeSumArgs s;
+  s.n = n;
+  s.channels = channels;
+  s.a = da.data();
+  s.b = db.data();
+  s.mask = dm.data();
+  s.partial_sums = sums.data();
+  s.partial_masked = masked.data();
+  backend.template launch<DafeSumKernel>(blocks, render::kernels::kBlockThreads, s);
+  DafeTotalArgs t;
+  t.blocks = blocks;
+  t.partial_sums = sums.data();
+  t.partial_masked = masked.data();
+  t.values = static_cast<double>(pixels) * channels;
+  t.paper_form = form == DafeLossForm::Paper;
+  t.scale = scale;
+  t.totals = totals.data();
+  backend.template launch<DafeTotalKernel>(1, render::kernels::kBlockThreads, t);
+  if (grad) {
+    backend.upload(dg, grad, values);  // the gradient so far, which the kernel adds to
+    DafeGradArgs g;
+    g.n = n;
+    g.channels = channels;
+    g.a = da.data();
+    g.b = db.data();
+    g.mask = dm.data();
+    g.totals = totals.data();
+    g.grad = dg.data();
+    backend.template launch<DafeGradKernel>(blocks, render::kernels::kBlockThreads, g);
+    std::vector<float> out;
+    backend.download(out, dg, values);
+    std::copy(out.begin(), out.end(), grad);
+  }
+  return backend.read(totals, 0).loss;
 }
 
 }  // namespace d2gs::train_kernels

@@ -1,6 +1,7 @@
 #pragma once
-// The host side of the dropout-mask and densification-statistic kernels over a backend of
-// render/kernels/pipeline.hpp, written once (CI runs it through the emulator). Host arrays in and out.
+// The host side of the DD-Drop probability, dropout-mask and densification-statistic kernels over a
+// backend of render/kernels/pipeline.hpp, written once (CI runs it through the emulator). Host arrays in
+// and out, except that DD-Drop's probabilities can go on to the mask kernel without leaving the device.
 #include <algorithm>
 #include <array>
 #include <cstdint>
@@ -10,7 +11,11 @@
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/random.hpp"
 #include "d2gs/render/kernels/block.hpp"
+#include "d2gs/model/gaussians.hpp"
+#include "d2gs/scene/camera.hpp"
 #include "d2gs/train/densify.hpp"
+#include "d2gs/train/dropout.hpp"
+#include "d2gs/train/kernels/dd_drop_kernels.hpp"
 #include "d2gs/train/kernels/densify_kernels.hpp"
 #include "d2gs/train/kernels/dropout_kernels.hpp"
 
@@ -27,18 +32,19 @@ inline const std::array<uint64_t, 4 * kJumpBits>& dropout_jump_table() {
   return table;
 }
 
-// dropgaussian_mask (probabilities null) or bernoulli_mask: the same multipliers from the same draws, and
-// rng left where the CPU leaves it (n draws on).
+// dropgaussian_mask (probabilities null) or bernoulli_mask of the n probabilities at `probabilities`, an
+// array of the backend (device memory): the same multipliers from the same draws, and rng left where the
+// CPU leaves it (n draws on).
 template <class Backend>
-void dropout_mask(Backend& backend, std::size_t n, const float* probabilities, double rate, bool compensate, Rng& rng,
-                  std::vector<float>& multiplier) {
+void dropout_mask_of(Backend& backend, std::size_t n, const float* probabilities, double rate, bool compensate,
+                     Rng& rng, std::vector<float>& multiplier) {
   multiplier.resize(n);
   if (n == 0) return;
   const long long chunks = (static_cast<long long>(n) + kDrawsPerThread - 1) / kDrawsPerThread;
   if (n > static_cast<std::size_t>(1u << 31) - 1 || chunks >= (1LL << kJumpBits))
     fail("dropout kernel: {} Gaussians exceed the int32 indices", n);
   typename Backend::template Array<uint64_t> jumps, end_state;
-  typename Backend::template Array<float> p, out;
+  typename Backend::template Array<float> out;
   const auto& table = dropout_jump_table();
   backend.upload(jumps, table.data(), table.size());
   end_state.resize(4);
@@ -50,8 +56,7 @@ void dropout_mask(Backend& backend, std::size_t n, const float* probabilities, d
   for (int k = 0; k < 4; ++k) a.state[k] = before.words[k];
   a.jumps = jumps.data();
   if (probabilities) {
-    backend.upload(p, probabilities, n);
-    a.probabilities = p.data();
+    a.probabilities = probabilities;
     a.compensate = compensate;
   } else {
     a.rate = rate;
@@ -66,6 +71,15 @@ void dropout_mask(Backend& backend, std::size_t n, const float* probabilities, d
   Rng::State state = before;
   for (int k = 0; k < 4; ++k) state.words[k] = after[static_cast<std::size_t>(k)];
   rng.set_state(state);
+}
+
+// The same with host probabilities (null: DropGaussian's mask).
+template <class Backend>
+void dropout_mask(Backend& backend, std::size_t n, const float* probabilities, double rate, bool compensate, Rng& rng,
+                  std::vector<float>& multiplier) {
+  typename Backend::template Array<float> p;
+  if (probabilities && n > 0) backend.upload(p, probabilities, n);
+  dropout_mask_of(backend, n, probabilities && n > 0 ? p.data() : nullptr, rate, compensate, rng, multiplier);
 }
 
 template <class Backend>
@@ -108,5 +122,82 @@ void add_gradient_stats(Backend& backend, GradientStats& stats, const std::vecto
   backend.download(counts, count, n);
   stats.restore(std::move(sums), std::move(counts));
 }
+
+// DD-Drop's probabilities on the backend: dd_drop_probabilities(gaussian_depths(model, camera, mode),
+// density_score, options, iteration), kept in the backend's memory for the mask (mask()) and copied out on
+// request (download()). The density scores (the host's kNN refresh and cache) are uploaded per call.
+template <class Backend>
+class DdDropPipeline {
+public:
+  explicit DdDropPipeline(Backend& backend) : backend_(backend) {}
+
+  void probabilities(const Gaussians& model, const Camera& camera, const std::vector<float>& density_score,
+                     const DdDropOptions& options, int iteration) {
+    const std::size_t n = model.size();
+    if (density_score.size() != n) fail("DD-Drop: {} density scores for {} Gaussians", density_score.size(), n);
+    if (n > static_cast<std::size_t>(1u << 31) - 1) fail("DD-Drop kernels: {} Gaussians exceed int32", n);
+    n_ = n;
+    if (n == 0) return;
+    backend_.upload(means_, model.means.data(), 3 * n);
+    backend_.upload(density_, density_score.data(), n);
+    depth_.resize(n);
+    keys_.resize(n);
+    keys_sorted_.resize(n);
+    index_.resize(n);
+    index_sorted_.resize(n);
+    probabilities_.resize(n);
+    GaussianDepthArgs d;
+    d.n = static_cast<int>(n);
+    d.means = means_.data();
+    d.euclidean = options.depth_mode == DepthMode::Euclidean;
+    const glm::dvec3 c = camera.center_world();
+    const glm::dvec3 axis = camera.R_world_to_cam[2];  // glm is column-major: the third column
+    for (int k = 0; k < 3; ++k) {
+      d.centre[k] = c[k];
+      d.axis[k] = axis[k];
+    }
+    d.depth = depth_.data();
+    d.keys = keys_.data();
+    d.index = index_.data();
+    launch<GaussianDepthKernel>(n, d);
+    // The ranks 0, ⌊0.33·N⌋, ⌊0.67·N⌋ and N − 1 of the depths: their keys sorted (32 bits).
+    backend_.sort_pairs(keys_, keys_sorted_, index_, index_sorted_, n, 32);
+    DdDropProbabilityArgs p;
+    p.n = static_cast<int>(n);
+    p.depth = depth_.data();
+    p.sorted_keys = keys_sorted_.data();
+    p.near_rank = static_cast<int>(tertile_rank(static_cast<long long>(n), kNearTertile));
+    p.far_rank = static_cast<int>(tertile_rank(static_cast<long long>(n), kFarTertile));
+    p.density_score = density_.data();
+    p.terms = dd_drop_terms(options, iteration);
+    p.probabilities = probabilities_.data();
+    launch<DdDropProbabilityKernel>(n, p);
+  }
+
+  // The probabilities of the last probabilities() call.
+  std::vector<float> download() {
+    std::vector<float> out;
+    backend_.download(out, probabilities_, n_);
+    return out;
+  }
+
+  // bernoulli_mask of them (the CPU's draws of rng), without copying them to the host.
+  void mask(Rng& rng, std::vector<float>& multiplier, bool compensate) {
+    dropout_mask_of(backend_, n_, n_ > 0 ? probabilities_.data() : nullptr, 0.0, compensate, rng, multiplier);
+  }
+
+private:
+  template <class Body, class Args>
+  void launch(std::size_t n, const Args& args) {
+    backend_.template launch<Body>(render::kernels::blocks_for(static_cast<long long>(n)),
+                                   render::kernels::kBlockThreads, args);
+  }
+
+  Backend& backend_;
+  std::size_t n_ = 0;
+  typename Backend::template Array<float> means_, density_, depth_, probabilities_;
+  typename Backend::template Array<std::uint64_t> keys_, keys_sorted_;
+  typename Backend::template Array<std::int32_t> index_, index_sorted_;
+};
 
 }  // namespace d2gs::train_kernels

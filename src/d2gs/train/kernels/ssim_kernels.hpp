@@ -17,14 +17,15 @@
 //  - SsimMapKernel: one thread per (channel, pixel): ssim_pixel of eval/ssim_math.hpp (the CPU's
 //    arithmetic), the map's local derivatives times g for the backward blurs, and the map's sum per block
 //    (double: warp shuffles, then the warps' sums in shared memory) into partials[block], no atomics.
-//  - SumPartialsKernel: one block adds the partials in a fixed order (thread t: partials t, t + 256, …;
-//    then the same block reduction), so the mean is the same on every run and on the GPU.
+//  - SumPartialsKernel (block_sum.hpp): one block adds the partials in a fixed order (thread t: partials
+//    t, t + 256, …; then the same block reduction), so the mean is the same on every run and on the GPU.
 //  - SsimGradKernel: one thread per value: grad += ssim_input_gradient of the blurred derivatives (added
 //    to what the buffer holds, the L1 gradient in the training step, as the CPU's Ssim::evaluate adds).
 #include <math.h>
 
 #include "d2gs/eval/ssim_math.hpp"
 #include "d2gs/render/kernels/block.hpp"
+#include "d2gs/train/kernels/block_sum.hpp"
 
 namespace d2gs::train_kernels {
 
@@ -111,30 +112,6 @@ D2GS_HD void blur_columns_thread(int i, const BlurArgs& a) {
 }
 using BlurColumnsKernel = render::kernels::PerItemKernel<BlurArgs, blur_columns_thread>;
 
-// The block's sum of s (one value per thread), handed to store(t, total) on thread 0: warp sums by
-// shfl_down, lane 0 of each warp into shared memory, thread 0 adds the warps' sums in order. Every thread
-// calls it.
-struct BlockSumShared {
-  double warp_sums[kBlockThreads / kWarpSize];
-};
-template <class Block, class Reg, class Store>
-D2GS_HD void block_sum(Block& b, BlockSumShared& sh, Reg& s, Reg& other, Store store) {
-  for (int offset = kWarpSize / 2; offset > 0; offset /= 2) {
-    b.shfl_down(other, s, offset);
-    b.threads([&](const Thread& t) { s[t] += other[t]; });
-  }
-  b.threads([&](const Thread& t) {
-    if (t.lane() == 0) sh.warp_sums[t.warp()] = s[t];
-  });
-  b.sync();
-  b.threads([&](const Thread& t) {
-    if (t.linear() != 0) return;
-    double total = 0.0;
-    for (int w = 0; w < t.block_threads() / kWarpSize; ++w) total += sh.warp_sums[w];
-    store(t, total);
-  });
-}
-
 struct SsimMapArgs {
   int n = 0;  // C·W·H
   const float* mu_a = nullptr;  // C planes each
@@ -170,28 +147,6 @@ struct SsimMapKernel {
       s[t] = static_cast<double>(m);
     });
     block_sum(b, sh, s, other, [&](const Thread& t, double total) { a.partials[t.block_x] = total; });
-  }
-};
-
-struct SumPartialsArgs {
-  int n = 0;
-  const double* partials = nullptr;
-  double* sum = nullptr;
-};
-
-// One block: thread t adds partials t, t + blockDim, … in order, then the block's sum.
-struct SumPartialsKernel {
-  using Shared = BlockSumShared;
-  template <class Block>
-  D2GS_HD static void run(Block& b, Shared& sh, const SumPartialsArgs& a) {
-    auto s = b.template reg<double>();
-    auto other = b.template reg<double>();
-    b.threads([&](const Thread& t) {
-      double v = 0.0;
-      for (int i = t.linear(); i < a.n; i += t.block_threads()) v += a.partials[i];
-      s[t] = v;
-    });
-    block_sum(b, sh, s, other, [&](const Thread&, double total) { *a.sum = total; });
   }
 };
 
