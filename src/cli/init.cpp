@@ -174,11 +174,12 @@ Run add_init_command(CLI::App& app) {
     if (o->oracle_accuracy) {
       if (scene.sfm_points.empty()) fail("{}: the scene has no SfM points to measure against", o->scene.source);
       nlohmann::json acc;
+      const PointCloud& sfm_points = scene.sfm_points;  // clang 14 lambdas cannot capture structured bindings
       const auto report = [&](const char* name, const PointCloud& cloud) {
-        const CloudAccuracy a = cloud_accuracy(cloud, scene.sfm_points);
+        const CloudAccuracy a = cloud_accuracy(cloud, sfm_points);
         spdlog::info("accuracy ({} vs the all-view SfM ORACLE, {} points): median distance {:.4g} = {:.4f} of the "
                      "extent {:.4g}; mean {:.4g} (the oracle's own point spacing: {:.4g})",
-                     name, scene.sfm_points.size(), a.median, a.median_fraction(), a.reference_extent, a.mean,
+                     name, sfm_points.size(), a.median, a.median_fraction(), a.reference_extent, a.mean,
                      a.reference_spacing);
         acc[name] = {{"median", a.median}, {"mean", a.mean}, {"extent", a.reference_extent},
                      {"median_fraction", a.median_fraction()}, {"reference_spacing", a.reference_spacing},

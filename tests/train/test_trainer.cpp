@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <memory>
 
@@ -19,6 +20,7 @@
 #include "d2gs/train/losses.hpp"
 #include "d2gs/train/initialize.hpp"
 #include "d2gs/train/trainer.hpp"
+#include "test_errors.hpp"
 #include "test_paths.hpp"
 
 namespace d2gs {
@@ -244,6 +246,16 @@ TEST(Trainer, D2gsDropsNearDenseGaussiansAndRuns) {
   for (int i = 0; i < 12; ++i) dropped += t.step().drop_fraction;
   EXPECT_GT(dropped / 12, 0.02);
   EXPECT_LT(dropped / 12, 0.3);
+}
+
+// A run that diverges stops with a one-line error at the iteration it happened, not with NaN models: an
+// infinite position learning rate sends the means to infinity in the first Adam step.
+TEST(Trainer, StopsWhenAParameterBecomesNonFinite) {
+  const auto dir = test::scratch_dir();
+  auto cfg = fern_config(dir / "run", "3dgs", 5);
+  cfg.lr.means = std::numeric_limits<float>::infinity();
+  Trainer t(cfg);
+  EXPECT_EQ(test::error_of([&] { t.step(); }), "iteration 1: a model parameter became non-finite; stopping");
 }
 
 TEST(Trainer, RefusesToOverwriteAndRejectsBadCheckpoints) {

@@ -5,7 +5,6 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
-#include <cstring>
 #include <fstream>
 #include <optional>
 #include <set>
@@ -16,6 +15,7 @@
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/file_lock.hpp"
+#include "d2gs/core/finite.hpp"
 #include "d2gs/core/random.hpp"
 #include "d2gs/eval/ssim.hpp"
 #include "d2gs/geometry/training_geometry.hpp"
@@ -44,22 +44,6 @@ float compute_scene_extent(const Scene& scene, const std::vector<int>& views) {
   for (int v : views) radius = std::max(radius, glm::length(scene.cameras[static_cast<std::size_t>(v)].center_world() - mean));
   if (!(radius > 0.0)) radius = 1.0;  // a single view: the original falls back likewise to a unit radius
   return static_cast<float>(1.1 * radius);
-}
-
-// Whether no value is NaN or infinite (exponent bits not all ones): a branch-free, vectorised and parallel
-// reduction over the bits, where a loop of std::isfinite with an early exit ran scalar (≈ 3 M values per
-// iteration at fern's model size).
-bool all_finite(const std::vector<float>& values) {
-  const float* v = values.data();
-  const std::ptrdiff_t n = static_cast<std::ptrdiff_t>(values.size());
-  std::uint32_t bad = 0;
-#pragma omp parallel for simd reduction(| : bad) schedule(static) if (n > 65536)
-  for (std::ptrdiff_t i = 0; i < n; ++i) {
-    std::uint32_t bits;
-    std::memcpy(&bits, v + i, sizeof bits);
-    bad |= static_cast<std::uint32_t>((bits & 0x7f800000u) == 0x7f800000u);
-  }
-  return bad == 0;
 }
 
 }  // namespace
