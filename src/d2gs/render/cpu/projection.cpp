@@ -15,8 +15,10 @@ void project_forward(const ModelView<T>& model, const T* opacity_multiplier, con
 #pragma omp parallel for schedule(static)
   for (std::ptrdiff_t i = 0; i < n; ++i) {
     const T m = opacity_multiplier ? opacity_multiplier[i] : T(1);
-    out.opacity[i] = sigmoid(model.opacity_logits[i]) * m;
-    ProjectionState<T> st;
+    const T s = sigmoid(model.opacity_logits[i]);
+    out.opacity_sigmoid[i] = s;
+    out.opacity[i] = s * m;
+    ProjectionState<T>& st = out.state[i];
     int radius = 0;
     T* mean2d = &out.mean2d[i * 2];
     T* conic = &out.conic[i * 3];
@@ -50,15 +52,11 @@ void project_backward(const ModelView<T>& model, const T* opacity_multiplier, co
     out.opacity_logits[i] = T(0);
     if (fwd.radii[i] <= 0) continue;
     const T m = opacity_multiplier ? opacity_multiplier[i] : T(1);
-    const T s = sigmoid(model.opacity_logits[i]);
+    const T s = fwd.opacity_sigmoid[i];
     out.opacity_logits[i] = grads.opacity[i] * m * s * (T(1) - s);
-    ProjectionState<T> st;
-    T mean2d[2], conic[3], depth;
-    int radius;
-    project_gaussian(model.means + i * 3, model.log_scales + i * 3, model.quats + i * 4, cam, mean2d, conic, depth,
-                     radius, st);
-    project_gaussian_vjp(model.means + i * 3, model.log_scales + i * 3, model.quats + i * 4, cam, st, conic,
-                         &grads.mean2d[i * 2], &grads.conic[i * 3], grads.depth[i], dm, ds, dq);
+    // The forward's state and conic (a Gaussian with radius > 0 keeps project_gaussian's values).
+    project_gaussian_vjp(model.means + i * 3, model.log_scales + i * 3, model.quats + i * 4, cam, fwd.state[i],
+                         &fwd.conic[i * 3], &grads.mean2d[i * 2], &grads.conic[i * 3], grads.depth[i], dm, ds, dq);
   }
 }
 
