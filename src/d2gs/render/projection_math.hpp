@@ -33,6 +33,15 @@ D2GS_HD float hd_floor(float x) { return floorf(x); }
 D2GS_HD double hd_floor(double x) { return floor(x); }
 template <typename T> D2GS_HD T hd_min(T a, T b) { return a < b ? a : b; }
 template <typename T> D2GS_HD T hd_max(T a, T b) { return a > b ? a : b; }
+// c ? a : b with both sides evaluated (the VJP's form, so that a SIMD scalar type can give it lane masks).
+template <typename T> D2GS_HD T hd_select(bool c, T a, T b) { return c ? a : b; }
+
+// The type of a per-Gaussian flag in ProjectionState<T>: bool, or a lane mask where the CPU backend
+// runs the VJP on a SIMD type (cpu/projection.cpp).
+template <typename T>
+struct StateFlag {
+  using type = bool;
+};
 
 inline constexpr int kTileSize = 16;        // 16 x 16 pixel tiles
 inline constexpr double kNearPlane = 0.2;   // cull when view-space z <= 0.2
@@ -98,13 +107,14 @@ D2GS_HD T normalize_quat(const T q[4], T qn[4]) {
   return norm;
 }
 
-// Sigma3 = M M^T with M = R(q) diag(exp(s)); full symmetric 3x3, row-major. Also returns M, R, qn.
+// Sigma3 = M M^T with M = R(q) diag(exp(s)); full symmetric 3x3, row-major. Also returns M, R, qn and
+// the scales s = exp(log_scale).
 template <typename T>
 D2GS_HD void covariance3d(const T log_scale[3], const T quat[4], T sigma[9], T M[9], T Rq[9], T qn[4],
-                          T& qnorm) {
+                          T& qnorm, T s[3]) {
   qnorm = normalize_quat(quat, qn);
   quat_to_rotmat(qn, Rq);
-  const T s[3] = {hd_exp(log_scale[0]), hd_exp(log_scale[1]), hd_exp(log_scale[2])};
+  for (int j = 0; j < 3; ++j) s[j] = hd_exp(log_scale[j]);
   for (int i = 0; i < 3; ++i)
     for (int j = 0; j < 3; ++j) M[i * 3 + j] = Rq[i * 3 + j] * s[j];
   for (int i = 0; i < 3; ++i)
@@ -112,14 +122,16 @@ D2GS_HD void covariance3d(const T log_scale[3], const T quat[4], T sigma[9], T M
       sigma[i * 3 + j] = M[i * 3 + 0] * M[j * 3 + 0] + M[i * 3 + 1] * M[j * 3 + 1] + M[i * 3 + 2] * M[j * 3 + 2];
 }
 
-// Intermediate values of one projection, kept so the VJP needs no second pass.
+// Intermediate values of one projection, kept so the VJP needs no second pass (the CPU backend keeps
+// the forward's; the CUDA kernels recompute them).
 template <typename T>
 struct ProjectionState {
   T pc[3];          // camera-space mean
   T u, v;           // clamped x/z, y/z
-  bool u_free, v_free;  // not clamped: the Jacobian depends on x/z, y/z
+  typename StateFlag<T>::type u_free, v_free;  // not clamped: the Jacobian depends on x/z, y/z
   T A[6];           // J W, 2x3 row-major
   T sigma[9], M[9], Rq[9], qn[4], qnorm;
+  T s[3];           // exp(log_scale)
   T cov2[3];        // (a, b, c) of Sigma2 including the +0.3
 };
 
@@ -132,7 +144,7 @@ D2GS_HD bool project_gaussian(const T mean[3], const T log_scale[3], const T qua
     st.pc[i] = R[i * 3 + 0] * mean[0] + R[i * 3 + 1] * mean[1] + R[i * 3 + 2] * mean[2] + cam.t[i];
   const T z = st.pc[2];
   if (!(z > T(kNearPlane))) return false;
-  covariance3d(log_scale, quat, st.sigma, st.M, st.Rq, st.qn, st.qnorm);
+  covariance3d(log_scale, quat, st.sigma, st.M, st.Rq, st.qn, st.qnorm, st.s);
   const T inv_z = T(1) / z;
   const T u_raw = st.pc[0] * inv_z, v_raw = st.pc[1] * inv_z;
   st.u_free = u_raw >= -cam.lim_x_neg && u_raw <= cam.lim_x_pos;
@@ -170,8 +182,8 @@ D2GS_HD bool project_gaussian(const T mean[3], const T log_scale[3], const T qua
   return true;
 }
 
-// VJP of project_gaussian (for a Gaussian it did not cull): accumulates into d_mean, d_log_scale,
-// d_quat (+=) from d(loss)/d(mean2d), d(loss)/d(conic (a,b,c)) and d(loss)/d(depth).
+// VJP of project_gaussian (for a Gaussian it did not cull, given the state it filled): accumulates into
+// d_mean, d_log_scale, d_quat (+=) from d(loss)/d(mean2d), d(loss)/d(conic (a,b,c)) and d(loss)/d(depth).
 // Exact derivative of the forward above, including the Jacobian clamp (a clamped x/z contributes no
 // gradient through x/z; its 1/z factor still does).
 template <typename T>
@@ -180,6 +192,7 @@ D2GS_HD void project_gaussian_vjp(const T mean[3], const T log_scale[3], const T
                                   const T conic[3], const T d_mean2d[2], const T d_conic[3], T d_depth,
                                   T d_mean[3], T d_log_scale[3], T d_quat[4]) {
   (void)mean;
+  (void)log_scale;
   const T* R = cam.R;
   const T z = st.pc[2], inv_z = T(1) / z;
   // conic = Sigma2^-1: dS = -Q G Q with G the matrix form of d_conic (off-diagonal halves).
@@ -219,8 +232,8 @@ D2GS_HD void project_gaussian_vjp(const T mean[3], const T log_scale[3], const T
   const T inv_z2 = inv_z * inv_z;
   dpc[2] += -cam.fx * inv_z2 * dJ00 + cam.fx * st.u * inv_z2 * dJ02 - cam.fy * inv_z2 * dJ11 +
             cam.fy * st.v * inv_z2 * dJ12;
-  const T du = st.u_free ? -cam.fx * inv_z * dJ02 : T(0);
-  const T dv = st.v_free ? -cam.fy * inv_z * dJ12 : T(0);
+  const T du = hd_select(st.u_free, -cam.fx * inv_z * dJ02, T(0));
+  const T dv = hd_select(st.v_free, -cam.fy * inv_z * dJ12, T(0));
   // mean2d = (fx x/z + cx - .5, fy y/z + cy - .5); u = x/z, v = y/z when not clamped.
   const T gx = du + cam.fx * d_mean2d[0], gy = dv + cam.fy * d_mean2d[1];
   dpc[0] += gx * inv_z;
@@ -236,7 +249,7 @@ D2GS_HD void project_gaussian_vjp(const T mean[3], const T log_scale[3], const T
   // M = Rq diag(s): dRq_ij = dM_ij s_j, ds_j = sum_i dM_ij Rq_ij, d log s = s ds.
   T dRq[9];
   for (int j = 0; j < 3; ++j) {
-    const T s = hd_exp(log_scale[j]);
+    const T s = st.s[j];
     T ds = 0;
     for (int i = 0; i < 3; ++i) {
       dRq[i * 3 + j] = dM[i * 3 + j] * s;

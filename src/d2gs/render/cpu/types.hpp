@@ -52,6 +52,10 @@ struct Projected {
   std::vector<int> radii;     // N, 0 = culled
   std::vector<T> color;       // N x 3, SH colour after the clamp
   std::vector<std::uint8_t> color_clamped;  // N x 3
+  // What project_backward needs of the forward (valid where radii > 0): the projection's intermediate
+  // values and sigmoid(logit), so that the backward does not compute them again.
+  std::vector<ProjectionState<T>> state;  // N
+  std::vector<T> opacity_sigmoid;         // N
   void resize(std::size_t n) {
     count = n;
     grow(mean2d, n * 2);
@@ -61,6 +65,8 @@ struct Projected {
     grow(radii, n);
     grow(color, n * 3);
     grow(color_clamped, n * 3);
+    grow(state, n);
+    grow(opacity_sigmoid, n);
   }
 };
 
