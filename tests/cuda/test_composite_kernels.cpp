@@ -17,6 +17,7 @@
 // largest reference value of the array (<= kBackwardRelMax).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <string>
@@ -312,6 +313,59 @@ TEST(EmulatedComposite, LoadedInputsGiveTheSameAsTheStages) {
   EXPECT_EQ(loaded.rgb, chained.rgb);
   EXPECT_EQ(loaded.n_contrib, chained.n_contrib);
   EXPECT_THROW(other->backward_from_composite(), Error);  // no model behind loaded inputs
+}
+
+// Timing mode (bench/bench_cuda.cpp) copies nothing back and keeps the uploaded model while its arrays are
+// the same ones; once it is off, the copies show what the device computed in the meantime.
+TEST(EmulatedComposite, TimingModeKeepsTheModelOnTheDeviceAndCopiesNothingBack) {
+  const Case& c = kCases[0];
+  render::CameraParams<float> cam;
+  const auto m = case_model(c, cam);
+  auto changed = m;
+  for (auto& v : changed.sh_dc) v += 0.25f;
+  const CompositeOptions co = composite_options(c, false);
+  const StageOptions so = stage_options(false);
+  const PixelGrads pg(c.width, c.height, c.seed, true, false, false);
+  struct Result {
+    CompositeStages image;
+    render::kernels::BackwardStages grads;
+  };
+  const auto reference = [&](const TestModel<float>& model) {
+    auto r = render::kernels::make_emulated_stages();
+    r->forward(model.view(), model.multiplier.data(), cam, so);
+    Result out{r->composite(co), {}};
+    r->composite_backward(pg.r(), nullptr, nullptr);
+    out.grads = r->backward_from_composite();
+    return out;
+  };
+  const Result want_m = reference(m), want_changed = reference(changed);
+  ASSERT_NE(want_m.image.rgb, want_changed.image.rgb);
+
+  auto runner = render::kernels::make_emulated_stages();
+  auto work = m;  // the model whose values change in place
+  runner->forward(work.view(), work.multiplier.data(), cam, so);
+  EXPECT_EQ(runner->composite(co).rgb, want_m.image.rgb);
+  runner->set_timing_mode(true);
+  // Other arrays: uploaded. Nothing is copied back.
+  runner->forward(changed.view(), changed.multiplier.data(), cam, so);
+  EXPECT_EQ(runner->composite(co).rgb, want_m.image.rgb);
+  runner->composite_backward(pg.r(), nullptr, nullptr);
+  runner->backward_from_composite();
+  runner->synchronize();
+  runner->set_timing_mode(false);
+  EXPECT_EQ(runner->composite(co).rgb, want_changed.image.rgb);
+  runner->composite_backward(pg.r(), nullptr, nullptr);
+  EXPECT_EQ(runner->backward_from_composite().sh_dc, want_changed.grads.sh_dc);
+
+  // The same arrays, changed in place: timing mode keeps the model it uploaded first.
+  runner->set_timing_mode(true);
+  runner->forward(work.view(), work.multiplier.data(), cam, so);
+  std::copy(changed.sh_dc.begin(), changed.sh_dc.end(), work.sh_dc.begin());  // in place
+  runner->forward(work.view(), work.multiplier.data(), cam, so);
+  runner->set_timing_mode(false);
+  EXPECT_EQ(runner->composite(co).rgb, want_m.image.rgb);
+  runner->forward(work.view(), work.multiplier.data(), cam, so);
+  EXPECT_EQ(runner->composite(co).rgb, want_changed.image.rgb);
 }
 
 // The whole backward on the device: compositing's gradients go on to the projection and SH kernels

@@ -56,6 +56,13 @@ std::string describe_device() {
                      static_cast<double>(prop.totalGlobalMem) / (1024.0 * 1024.0 * 1024.0));
 }
 
+std::size_t device_memory_in_use() {
+  if (device_count() == 0) fail("CUDA: {}", describe_device());
+  std::size_t free = 0, total = 0;
+  check(cudaMemGetInfo(&free, &total), "cudaMemGetInfo");
+  return total - free;
+}
+
 std::vector<float> sigmoid_on_device(const std::vector<float>& logits) {
   if (device_count() == 0) fail("CUDA: {}", describe_device());
   const int n = static_cast<int>(logits.size());

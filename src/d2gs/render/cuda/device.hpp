@@ -1,6 +1,7 @@
 #pragma once
 // CUDA device discovery and the first kernels. Every function here exists in every build: without the
 // CUDA backend (D2GS_HAVE_CUDA undefined) they report that no GPU is available.
+#include <cstddef>
 #include <string>
 #include <vector>
 
@@ -10,6 +11,9 @@ namespace d2gs::cuda {
 int device_count();
 // A one-line description of device 0, or why there is none.
 std::string describe_device();
+// Bytes of device 0's memory in use by every process (cudaMemGetInfo: total - free); throws d2gs::Error
+// when no GPU is available.
+std::size_t device_memory_in_use();
 // out[i] = sigmoid(logits[i]) computed on the GPU; throws d2gs::Error when no GPU is available.
 std::vector<float> sigmoid_on_device(const std::vector<float>& logits);
 

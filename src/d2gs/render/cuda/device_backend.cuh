@@ -94,6 +94,7 @@ struct DeviceBackend {
                                           values_out.data(), static_cast<int>(n), 0, end_bit),
           "cub::DeviceRadixSort::SortPairs");
   }
+  void synchronize() { check(cudaDeviceSynchronize(), "cudaDeviceSynchronize"); }
 };
 
 }  // namespace d2gs::cuda

@@ -6,6 +6,7 @@
 namespace d2gs::cuda {
 int device_count() { return 0; }
 std::string describe_device() { return "this d2gs was built without CUDA"; }
+std::size_t device_memory_in_use() { fail("CUDA: {}", describe_device()); }
 std::vector<float> sigmoid_on_device(const std::vector<float>&) { fail("CUDA: {}", describe_device()); }
 ProjectionOutputs project_on_device(const std::vector<float>&, const std::vector<float>&, const std::vector<float>&,
                                     const DeviceCamera&) {

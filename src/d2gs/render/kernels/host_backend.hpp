@@ -59,6 +59,7 @@ struct HostBackend {
                   Array<std::int32_t>& values_out, std::size_t n, int end_bit) {
     emulate::sort_pairs(keys.data(), keys_out.data(), values.data(), values_out.data(), n, end_bit);
   }
+  void synchronize() {}
 };
 
 }  // namespace d2gs::render::kernels::emulate

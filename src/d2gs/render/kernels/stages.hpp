@@ -109,6 +109,15 @@ public:
   virtual void load_projected(const ProjectedIn& in) = 0;
   // The device scan alone (kernels/scan_kernels.hpp), for tests of sizes the scenes do not reach.
   virtual std::vector<int> inclusive_scan(const std::vector<int>& values) = 0;
+
+  // Timing mode (bench/bench_cuda.cpp), off by default: the stages copy none of their outputs to the host
+  // (the returned structs keep their last values), and forward() uploads the model only when its arrays
+  // (pointers, count, SH size, multiplier) differ from the last upload, so a chain of calls measures the
+  // device's work plus the one scalar each forward() reads back. The caller must not change a model's
+  // values in place while timing mode is on.
+  virtual void set_timing_mode(bool on) = 0;
+  // Waits until every stage launched so far has finished (a no-op on the CPU).
+  virtual void synchronize() = 0;
 };
 
 // The kernels run on the CPU by the emulator (kernels/emulate.hpp).
