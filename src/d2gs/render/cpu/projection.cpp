@@ -184,6 +184,26 @@ void vjp4(const int* idx, int count, const CameraParams<F4>& cam, const Projecte
 }
 #endif
 
+// Gaussian i's share of the backward that both loops do: its geometry gradients zeroed (the VJP adds to
+// them), and its opacity-logit gradient through the multiplier and the sigmoid. False for a culled Gaussian,
+// whose gradients stay zero.
+template <typename T>
+inline bool zero_and_opacity_grad(std::ptrdiff_t i, const T* opacity_multiplier, const Projected<T>& fwd,
+                                  const ProjectedGrads<T>& grads, const ModelGradView<T>& out) {
+  T* dm = out.means + i * 3;
+  T* ds = out.log_scales + i * 3;
+  T* dq = out.quats + i * 4;
+  dm[0] = dm[1] = dm[2] = T(0);
+  ds[0] = ds[1] = ds[2] = T(0);
+  dq[0] = dq[1] = dq[2] = dq[3] = T(0);
+  out.opacity_logits[i] = T(0);
+  if (fwd.radii[i] <= 0) return false;
+  const T m = opacity_multiplier ? opacity_multiplier[i] : T(1);
+  const T s = fwd.opacity_sigmoid[i];
+  out.opacity_logits[i] = grads.opacity[i] * m * s * (T(1) - s);
+  return true;
+}
+
 }  // namespace
 
 template <typename T>
@@ -201,17 +221,7 @@ void project_backward(const ModelView<T>& model, const T* opacity_multiplier, co
       int count = 0;
       const std::ptrdiff_t end = std::min(n, (b + 1) * kBlock);
       for (std::ptrdiff_t i = b * kBlock; i < end; ++i) {
-        T* dm = out.means + i * 3;
-        T* ds = out.log_scales + i * 3;
-        T* dq = out.quats + i * 4;
-        dm[0] = dm[1] = dm[2] = T(0);
-        ds[0] = ds[1] = ds[2] = T(0);
-        dq[0] = dq[1] = dq[2] = dq[3] = T(0);
-        out.opacity_logits[i] = T(0);
-        if (fwd.radii[i] <= 0) continue;
-        const T m = opacity_multiplier ? opacity_multiplier[i] : T(1);
-        const T s = fwd.opacity_sigmoid[i];
-        out.opacity_logits[i] = grads.opacity[i] * m * s * (T(1) - s);
+        if (!zero_and_opacity_grad(i, opacity_multiplier, fwd, grads, out)) continue;
         idx[count++] = static_cast<int>(i);
         if (count == 4) {
           vjp4(idx, 4, cam4, fwd, grads, out);
@@ -225,17 +235,10 @@ void project_backward(const ModelView<T>& model, const T* opacity_multiplier, co
 #endif
 #pragma omp parallel for schedule(static)
   for (std::ptrdiff_t i = 0; i < n; ++i) {
+    if (!zero_and_opacity_grad(i, opacity_multiplier, fwd, grads, out)) continue;
     T* dm = out.means + i * 3;
     T* ds = out.log_scales + i * 3;
     T* dq = out.quats + i * 4;
-    dm[0] = dm[1] = dm[2] = T(0);
-    ds[0] = ds[1] = ds[2] = T(0);
-    dq[0] = dq[1] = dq[2] = dq[3] = T(0);
-    out.opacity_logits[i] = T(0);
-    if (fwd.radii[i] <= 0) continue;
-    const T m = opacity_multiplier ? opacity_multiplier[i] : T(1);
-    const T s = fwd.opacity_sigmoid[i];
-    out.opacity_logits[i] = grads.opacity[i] * m * s * (T(1) - s);
     // The forward's state and conic (a Gaussian with radius > 0 keeps project_gaussian's values).
     project_gaussian_vjp(model.means + i * 3, model.log_scales + i * 3, model.quats + i * 4, cam, fwd.state[i],
                          &fwd.conic[i * 3], &grads.mean2d[i * 2], &grads.conic[i * 3], grads.depth[i], dm, ds, dq);
