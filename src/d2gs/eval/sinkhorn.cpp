@@ -730,6 +730,31 @@ void plan_row_precise(CostSpan span, const double* pot, double shift, double inv
 // v = exp(ψ − ψ̂). Each iteration, in one pass over K by chunks of rows: s_i = (K v)_i, u_i = a_i / s_i,
 // φ_i = φ̂_i + log u_i, y += u_i K_i (the chunk's accumulator); then v_j = b_j / y_j, ψ_j = ψ̂_j + log v_j. It is
 // the log-domain iteration written with scalings: the same map, the same fixed point, the same stopping rule.
+// What both solvers do on entering the stage at ε: the potentials rescaled so that f = εφ and g = εψ carry
+// over from the previous ε, the stage's record started, and its tolerance (the final one in the last stage).
+struct StageEntry {
+  bool last_stage;
+  double inv_eps, tolerance;
+};
+StageEntry enter_stage(double eps, const std::vector<double>& epsilons, const SinkhornOptions& options,
+                       double& eps_prev, std::vector<double>& phi, std::vector<double>& psi, SinkhornResult& result,
+                       SinkhornStage& stage) {
+  const bool last_stage = eps == epsilons.back();
+  const double rescale = eps_prev / eps;
+  for (auto& x : phi) x *= rescale;
+  for (auto& x : psi) x *= rescale;
+  eps_prev = eps;
+  result.converged = false;
+  stage.epsilon = eps;
+  return {last_stage, 1.0 / eps,
+          last_stage ? options.tolerance : std::max(options.tolerance, options.stage_tolerance)};
+}
+
+// Anderson restarts allowed per stage (a negative option: no limit).
+int anderson_max_restarts(const SinkhornOptions& options) {
+  return options.anderson_max_restarts < 0 ? std::numeric_limits<int>::max() : options.anderson_max_restarts;
+}
+
 SinkhornResult sinkhorn_kernel(std::span<const double> a, std::span<const double> b, const std::vector<double>& log_a,
                                const std::vector<double>& log_b, const CostMatrix& cost, const SinkhornOptions& options,
                                int threads, const std::vector<double>& epsilons) {
@@ -771,21 +796,15 @@ SinkhornResult sinkhorn_kernel(std::span<const double> a, std::span<const double
   double eps_prev = epsilons.front();
   for (const double eps : epsilons) {
     const auto stage_start = std::chrono::steady_clock::now();
-    const bool last_stage = eps == epsilons.back();
-    const double inv_eps = 1.0 / eps;
-    const double tolerance = last_stage ? options.tolerance : std::max(options.tolerance, options.stage_tolerance);
-    const double rescale = eps_prev / eps;  // keep f = εφ, g = εψ across stages
-    for (auto& x : phi) x *= rescale;
-    for (auto& x : psi) x *= rescale;
-    eps_prev = eps;
-    result.converged = false;
     SinkhornStage stage;
-    stage.epsilon = eps;
+    // Plain names, not a structured binding: clang 14 cannot capture those in lambdas and OpenMP regions.
+    const StageEntry entry = enter_stage(eps, epsilons, options, eps_prev, phi, psi, result, stage);
+    const bool last_stage = entry.last_stage;
+    const double inv_eps = entry.inv_eps, tolerance = entry.tolerance;
     absorb(inv_eps);
     ++stage.absorptions;
     bool accelerate = options.anderson_depth > 0;
-    const int max_restarts = options.anderson_max_restarts < 0 ? std::numeric_limits<int>::max()
-                                                               : options.anderson_max_restarts;
+    const int max_restarts = anderson_max_restarts(options);
     anderson.reset();
     while (result.iterations < options.max_iterations) {
       // Rows (u, φ) and the chunks of Kᵀu.
@@ -977,23 +996,17 @@ SinkhornResult sinkhorn(std::span<const double> a, std::span<const double> b, co
   double eps_prev = epsilons.front();
   for (const double eps : epsilons) {
     const auto stage_start = std::chrono::steady_clock::now();
-    const bool last_stage = eps == epsilons.back();
-    const double inv_eps = 1.0 / eps;
-    const double tolerance = last_stage ? options.tolerance : std::max(options.tolerance, options.stage_tolerance);
-    const double rescale = eps_prev / eps;  // keep f = εφ, g = εψ across stages
-    for (auto& v : phi) v *= rescale;
-    for (auto& v : psi) v *= rescale;
-    eps_prev = eps;
-    result.converged = false;
     SinkhornStage stage;
-    stage.epsilon = eps;
+    // Plain names, not a structured binding: clang 14 cannot capture those in lambdas and OpenMP regions.
+    const StageEntry entry = enter_stage(eps, epsilons, options, eps_prev, phi, psi, result, stage);
+    const bool last_stage = entry.last_stage;
+    const double inv_eps = entry.inv_eps, tolerance = entry.tolerance;
     bool first = true;  // no previous log-sum-exp at this ε to shift by
     const double nan = std::numeric_limits<double>::quiet_NaN();
     // Anderson acceleration in this stage until, in the last stage, an iteration has reached the tolerance;
     // then plain iterations decide the stop.
     bool accelerate = options.anderson_depth > 0;
-    const int max_restarts = options.anderson_max_restarts < 0 ? std::numeric_limits<int>::max()
-                                                               : options.anderson_max_restarts;
+    const int max_restarts = anderson_max_restarts(options);
     anderson.reset();
     while (result.iterations < options.max_iterations) {
 #pragma omp parallel num_threads(threads)
