@@ -7,14 +7,15 @@ namespace d2gs::cli {
 void add_device_flag(CLI::App& cmd, std::string& word) {
   word = "auto";
   cmd.add_option("--device", word,
-                 "Backend: cpu (the reference), cuda (an error where no CUDA device or no complete CUDA backend "
-                 "exists), auto (CUDA when both exist, else the CPU, saying why; `d2gs info` shows the choice)")
+                 "Backend: cpu (the reference), cuda (an error where no CUDA device exists or the CUDA backend does not "
+                 "run this command: it renders, but does not train yet), auto (CUDA where it can, else the CPU, "
+                 "saying why; `d2gs info` shows the choice)")
       ->capture_default_str()
       ->check(CLI::IsMember({"cpu", "cuda", "auto"}));
 }
 
-render::DeviceChoice resolve_device_flag(const std::string& word) {
-  return render::choose_device(render::parse_device_request(word));
+render::DeviceChoice resolve_device_flag(const std::string& word, render::DeviceWork work) {
+  return render::choose_device(render::parse_device_request(word), work);
 }
 
 void log_device_choice(const render::DeviceChoice& choice) {

@@ -12,7 +12,7 @@ namespace d2gs::cli {
 // Adds --device to `cmd`, stored in `word` (default "auto").
 void add_device_flag(CLI::App& cmd, std::string& word);
 // The backend for `word`: a one-line d2gs::Error for `cuda` that cannot be had. Call it before any work.
-render::DeviceChoice resolve_device_flag(const std::string& word);
+render::DeviceChoice resolve_device_flag(const std::string& word, render::DeviceWork work);
 // For `auto` that took the CPU, an info line saying why. Call it once the inputs are checked, so that an
 // error about them stays one line.
 void log_device_choice(const render::DeviceChoice& choice);

@@ -78,7 +78,7 @@ Run add_eval_command(CLI::App& app) {
   add_device_flag(*cmd, *device);
   return [model_dir, iteration, json_only, lpips_weights, lpips_range, source, image_source, device]() -> int {
     // Options first, so that a bad weights file or device fails before any rendering.
-    const render::DeviceChoice backend = resolve_device_flag(*device);
+    const render::DeviceChoice backend = resolve_device_flag(*device, render::DeviceWork::Render);
     const LpipsInputRange range = parse_lpips_input_range(*lpips_range, "--lpips-input-range");
     std::optional<Lpips> lpips;
     if (!lpips_weights->empty()) lpips.emplace(Lpips::load(*lpips_weights));
@@ -116,6 +116,7 @@ Run add_eval_command(CLI::App& app) {
     eo.lpips = lpips ? &*lpips : nullptr;
     eo.lpips_range = range;
     eo.lpips_skipped = "no LPIPS weights given (--lpips-weights FILE or D2GS_LPIPS_WEIGHTS)";
+    eo.device = backend;
     log_device_choice(backend);
     const EvalSummary summary = evaluate_views(model, scene, test, eo);
     const nlohmann::json j = write_results_json(run, summary, scene,

@@ -109,23 +109,31 @@ void print_table(const Scene& scene, const Split& split) {
 
 // The backends: what --device auto would use and why, the CPU's tile-loop levels, CUDA's state.
 nlohmann::ordered_json backend_json() {
-  const render::DeviceChoice choice = render::choose_device(render::DeviceRequest::Auto);
+  const render::DeviceChoice choice = render::choose_device(render::DeviceRequest::Auto, render::DeviceWork::Train);
+  const render::DeviceChoice rendering =
+      render::choose_device(render::DeviceRequest::Auto, render::DeviceWork::Render);
   nlohmann::ordered_json j;
-  j["device"] = render::to_string(choice.device);
+  j["device"] = render::to_string(choice.device);  // d2gs train
   j["description"] = choice.description;
   if (!choice.reason.empty()) j["reason"] = choice.reason;
+  j["render_device"] = render::to_string(rendering.device);  // d2gs render, eval
+  if (!rendering.reason.empty()) j["render_reason"] = rendering.reason;
   j["cpu_tile_levels"] = render::cpu::available_tile_isas();
   j["cuda_devices"] = cuda::device_count();
   j["cuda_device"] = cuda::describe_device();
-  j["cuda_backend_complete"] = render::cuda_backend_complete();
+  j["cuda_runs"] = {{"render", render::cuda_backend_runs(render::DeviceWork::Render)},
+                    {"train", render::cuda_backend_runs(render::DeviceWork::Train)}};
   return j;
 }
 
 void print_backend() {
-  const render::DeviceChoice choice = render::choose_device(render::DeviceRequest::Auto);
+  const render::DeviceChoice choice = render::choose_device(render::DeviceRequest::Auto, render::DeviceWork::Train);
+  const render::DeviceChoice rendering =
+      render::choose_device(render::DeviceRequest::Auto, render::DeviceWork::Render);
   std::string s;
-  s += fmt::format("device      {} (what --device auto uses)\n", choice.description);
+  s += fmt::format("device      {} (what --device auto uses for training)\n", choice.description);
   if (!choice.reason.empty()) s += fmt::format("            not CUDA: {}\n", choice.reason);
+  s += fmt::format("rendering   {} (d2gs render and eval with --device auto)\n", rendering.description);
   s += fmt::format("CPU levels  {} (D2GS_CPU_ISA picks one)\n", fmt::join(render::cpu::available_tile_isas(), ", "));
   s += fmt::format("CUDA        {} device(s): {}\n", cuda::device_count(), cuda::describe_device());
   std::fputs(s.c_str(), stdout);

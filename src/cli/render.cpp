@@ -41,7 +41,7 @@ struct RenderCommandOptions {
 int run_render(const RenderCommandOptions& o) {
   if (o.split != "test" && o.split != "train" && o.split != "all")
     fail("--split must be test, train or all (got '{}')", o.split);
-  const render::DeviceChoice backend = resolve_device_flag(o.device);  // the CPU until the CUDA backend renders
+  const render::DeviceChoice backend = resolve_device_flag(o.device, render::DeviceWork::Render);
   const std::filesystem::path out_dir = o.output;
   check_output_folder(out_dir);  // before any work: a path under a file fails now, not after rendering
   const Gaussians model = read_gaussians_ply(o.model);
@@ -58,7 +58,7 @@ int run_render(const RenderCommandOptions& o) {
   std::filesystem::create_directories(out_dir);
 
   log_device_choice(backend);
-  auto rasterizer = render::make_cpu_rasterizer();
+  auto rasterizer = render::make_rasterizer(backend);
   render::RenderOptions ro;
   ro.background = scene.background;
   ro.sh_degree = o.sh_degree;

@@ -19,12 +19,19 @@ namespace fs = std::filesystem;
 
 std::string fern() { return (test::shared_data() / "nerf_llff_data/fern").string(); }
 
-// True where CUDA would be chosen: a device and a CUDA backend that runs a whole step. Until then every
-// machine, with or without a GPU, takes the paths these tests check.
-bool cuda_usable() { return render::cuda_backend_complete() && cuda::device_count() > 0; }
+// True where CUDA would be chosen for `work`: a device and a CUDA backend that runs it. Training: not
+// until the CUDA backend runs a whole step; rendering: wherever a device exists.
+bool cuda_usable(render::DeviceWork work = render::DeviceWork::Train) {
+  return render::cuda_backend_runs(work) && cuda::device_count() > 0;
+}
+
+TEST(DeviceChoice, TheCudaBackendRendersButDoesNotTrainYet) {
+  EXPECT_TRUE(render::cuda_backend_runs(render::DeviceWork::Render));
+  EXPECT_FALSE(render::cuda_backend_runs(render::DeviceWork::Train));
+}
 
 TEST(DeviceChoice, CpuIsAlwaysTheCpu) {
-  const render::DeviceChoice c = render::choose_device(render::DeviceRequest::Cpu);
+  const render::DeviceChoice c = render::choose_device(render::DeviceRequest::Cpu, render::DeviceWork::Train);
   EXPECT_EQ(c.device, render::Device::Cpu);
   EXPECT_TRUE(c.reason.empty());
   EXPECT_NE(c.description.find("CPU ("), std::string::npos) << c.description;
@@ -33,19 +40,19 @@ TEST(DeviceChoice, CpuIsAlwaysTheCpu) {
 
 TEST(DeviceChoice, AutoFallsBackToTheCpuAndSaysWhy) {
   if (cuda_usable()) GTEST_SKIP() << "CUDA is usable here: auto chooses it";
-  const render::DeviceChoice c = render::choose_device(render::DeviceRequest::Auto);
+  const render::DeviceChoice c = render::choose_device(render::DeviceRequest::Auto, render::DeviceWork::Train);
   EXPECT_EQ(c.device, render::Device::Cpu);
   ASSERT_FALSE(c.reason.empty());
   // Without a device the reason is the discovery's; with one, that the backend is incomplete.
   if (cuda::device_count() == 0) EXPECT_EQ(c.reason, cuda::describe_device());
-  else EXPECT_NE(c.reason.find("does not yet run a whole training step"), std::string::npos) << c.reason;
+  else EXPECT_NE(c.reason.find("does not yet run a training step"), std::string::npos) << c.reason;
 }
 
 TEST(DeviceChoice, CudaThatCannotBeHadIsAOneLineError) {
   if (cuda_usable()) GTEST_SKIP() << "CUDA is usable here";
   std::string message;
   try {
-    render::choose_device(render::DeviceRequest::Cuda);
+    render::choose_device(render::DeviceRequest::Cuda, render::DeviceWork::Train);
   } catch (const Error& e) {
     message = e.what();
   }
@@ -94,9 +101,15 @@ TEST(DeviceCli, TrainRenderEvalTakeTheFlag) {
                                                (dir / "run/config.json").string(), (dir / "again").string()));
   EXPECT_EQ(again.exit_code, 0) << again.output;
 
+  // Rendering runs on the CUDA backend wherever a device exists; without one, cuda is refused.
+  const bool renders_on_cuda = cuda_usable(render::DeviceWork::Render);
   const auto eval_cuda = test::run_cli(fmt::format("-q eval -m '{}' --device cuda", (dir / "run").string()));
-  EXPECT_EQ(eval_cuda.exit_code, 1) << eval_cuda.output;
-  EXPECT_NE(eval_cuda.output.find("--device cuda: "), std::string::npos) << eval_cuda.output;
+  if (renders_on_cuda) {
+    EXPECT_EQ(eval_cuda.exit_code, 0) << eval_cuda.output;
+  } else {
+    EXPECT_EQ(eval_cuda.exit_code, 1) << eval_cuda.output;
+    EXPECT_NE(eval_cuda.output.find("--device cuda: "), std::string::npos) << eval_cuda.output;
+  }
   const auto eval_cpu = test::run_cli(fmt::format("-q eval -m '{}' --device cpu --json", (dir / "run").string()));
   ASSERT_EQ(eval_cpu.exit_code, 0) << eval_cpu.output;
   EXPECT_EQ(nlohmann::json::parse(eval_cpu.output)["device"], "cpu");
@@ -104,16 +117,21 @@ TEST(DeviceCli, TrainRenderEvalTakeTheFlag) {
   const auto render_cuda = test::run_cli(fmt::format("-q render -m '{}' -s '{}' -r 8 --n-views 3 -o '{}' --device cuda",
                                                      (dir / "run/point_cloud/iteration_2/point_cloud.ply").string(), fern(),
                                                      (dir / "renders").string()));
-  EXPECT_EQ(render_cuda.exit_code, 1) << render_cuda.output;
-  EXPECT_NE(render_cuda.output.find("--device cuda: "), std::string::npos) << render_cuda.output;
-  EXPECT_FALSE(fs::exists(dir / "renders"));
+  if (renders_on_cuda) {
+    EXPECT_EQ(render_cuda.exit_code, 0) << render_cuda.output;
+  } else {
+    EXPECT_EQ(render_cuda.exit_code, 1) << render_cuda.output;
+    EXPECT_NE(render_cuda.output.find("--device cuda: "), std::string::npos) << render_cuda.output;
+    EXPECT_FALSE(fs::exists(dir / "renders"));
+  }
 }
 
 // d2gs info without a scene: the backend --device auto would use, as a table and as JSON.
 TEST(DeviceCli, InfoSaysWhichDeviceWouldBeUsed) {
   const auto table = test::run_cli("info");
   ASSERT_EQ(table.exit_code, 0) << table.output;
-  EXPECT_NE(table.output.find("(what --device auto uses)"), std::string::npos) << table.output;
+  EXPECT_NE(table.output.find("(what --device auto uses for training)"), std::string::npos) << table.output;
+  EXPECT_NE(table.output.find("(d2gs render and eval with --device auto)"), std::string::npos) << table.output;
   EXPECT_NE(table.output.find("CUDA "), std::string::npos) << table.output;
   const auto j = test::run_cli("info --json");
   ASSERT_EQ(j.exit_code, 0) << j.output;
@@ -122,6 +140,9 @@ TEST(DeviceCli, InfoSaysWhichDeviceWouldBeUsed) {
   EXPECT_EQ(backend["cuda_devices"], cuda::device_count());
   EXPECT_FALSE(backend["cpu_tile_levels"].empty());
   EXPECT_EQ(backend.contains("reason"), !cuda_usable());
+  EXPECT_EQ(backend["render_device"], cuda_usable(render::DeviceWork::Render) ? "cuda" : "cpu");
+  EXPECT_EQ(backend["cuda_runs"]["render"], true);
+  EXPECT_EQ(backend["cuda_runs"]["train"], false);
 }
 
 }  // namespace

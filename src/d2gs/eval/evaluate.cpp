@@ -8,6 +8,7 @@
 
 #include "d2gs/core/image.hpp"
 #include "d2gs/eval/image_metrics.hpp"
+#include "d2gs/render/device_choice.hpp"
 #include "d2gs/render/rasterizer.hpp"
 
 namespace d2gs {
@@ -15,7 +16,7 @@ namespace d2gs {
 EvalSummary evaluate_views(const Gaussians& model, const Scene& scene, const std::vector<int>& views,
                            const EvalOptions& options) {
   EvalSummary summary;
-  auto rasterizer = render::make_cpu_rasterizer();
+  auto rasterizer = render::make_rasterizer(options.device);
   if (options.lpips) {
     summary.lpips_net = options.lpips->description();
     summary.lpips_weights = options.lpips->source().string();

@@ -10,6 +10,7 @@
 
 #include "d2gs/eval/lpips.hpp"
 #include "d2gs/model/gaussians.hpp"
+#include "d2gs/render/device_choice.hpp"
 #include "d2gs/scene/scene.hpp"
 
 namespace d2gs {
@@ -32,6 +33,8 @@ struct EvalSummary {
 
 struct EvalOptions {
   int sh_degree = -1;  // -1: the model's
+  // The renderer: the CPU reference (default) or the CUDA backend's (render::choose_device).
+  render::DeviceChoice device{render::Device::Cpu, "CPU", ""};
   // When set, writes DIR/renders/NAME.png and DIR/gt/NAME.png (the layout of the original render.py).
   std::filesystem::path render_dir;
   // LPIPS network (not owned); when null, LPIPS and AVGE are reported unavailable with `lpips_skipped`.

@@ -9,6 +9,9 @@
 #include "d2gs/core/error.hpp"
 #include "d2gs/render/cpu/composite_tiles.hpp"
 #include "d2gs/render/cuda/device.hpp"
+#include "d2gs/render/cuda/stages.hpp"
+#include "d2gs/render/kernels/kernel_rasterizer.hpp"
+#include "d2gs/render/rasterizer.hpp"
 
 namespace d2gs::render {
 
@@ -30,9 +33,12 @@ const char* to_string(DeviceRequest request) {
 
 const char* to_string(Device device) { return device == Device::Cuda ? "cuda" : "cpu"; }
 
-// The kernels that exist (projection, SH, tile intersection, Adam, L1 and what render/kernels/ lists) do
-// not yet make a training step: compositing, SSIM, densification, the dropout masks and DAFE are missing.
-bool cuda_backend_complete() { return false; }
+const char* to_string(DeviceWork work) { return work == DeviceWork::Render ? "rendering" : "a training step"; }
+
+// Rendering: projection, SH, tile intersection and compositing, forward and backward, are kernels. A training
+// step also needs the losses, Adam, the dropout masks and densification chained on the device without host
+// round trips, which the trainer does not do yet.
+bool cuda_backend_runs(DeviceWork work) { return work == DeviceWork::Render; }
 
 std::string describe_cpu_backend() {
 #ifdef _OPENMP
@@ -44,21 +50,25 @@ std::string describe_cpu_backend() {
                      threads == 1 ? "" : "s");
 }
 
-DeviceChoice choose_device(DeviceRequest request) {
+DeviceChoice choose_device(DeviceRequest request, DeviceWork work) {
   DeviceChoice cpu_choice{Device::Cpu, describe_cpu_backend(), ""};
   if (request == DeviceRequest::Cpu) return cpu_choice;
   // Why CUDA cannot be used, or empty when it can.
   std::string why;
   if (cuda::device_count() == 0)
     why = cuda::describe_device();  // "no CUDA device: ...", "this d2gs was built without CUDA"
-  else if (!cuda_backend_complete())
-    why = fmt::format("{} found, but the CUDA backend does not yet run a whole training step or render "
-                      "(docs/architecture.md)",
-                      cuda::describe_device());
+  else if (!cuda_backend_runs(work))
+    why = fmt::format("{} found, but the CUDA backend does not yet run {} (docs/architecture.md)",
+                      cuda::describe_device(), to_string(work));
   if (why.empty()) return {Device::Cuda, "CUDA " + cuda::describe_device(), ""};
   if (request == DeviceRequest::Cuda) fail("--device cuda: {}; use --device cpu or auto", why);
   cpu_choice.reason = why;
   return cpu_choice;
+}
+
+std::unique_ptr<Rasterizer> make_rasterizer(const DeviceChoice& choice) {
+  if (choice.device == Device::Cpu) return make_cpu_rasterizer();
+  return kernels::make_kernel_rasterizer(cuda::make_device_stages(), true);
 }
 
 }  // namespace d2gs::render

@@ -1,13 +1,16 @@
 #pragma once
 // Which backend a command runs on: `--device cpu|cuda|auto` of d2gs train, render and eval, and what
 // `d2gs info` reports. The CPU backend is the reference and runs everything. The CUDA backend
-// (render/cuda/, render/kernels/) runs the stages that exist as kernels (docs/architecture.md, "CUDA
-// backend and its CPU emulation"), but not yet a whole training step or render; until it does, `cuda` is
-// refused with the reason and `auto` takes the CPU and says why.
+// (render/cuda/, render/kernels/) renders, forward and backward, on the device; it does not yet run a
+// whole training step (docs/architecture.md, "CUDA backend and its CPU emulation"). Until it does,
+// `train --device cuda` is refused with the reason and `train --device auto` takes the CPU and says why.
+#include <memory>
 #include <string>
 #include <string_view>
 
 namespace d2gs::render {
+
+class Rasterizer;
 
 enum class DeviceRequest { Cpu, Cuda, Auto };
 enum class Device { Cpu, Cuda };
@@ -24,13 +27,22 @@ struct DeviceChoice {
   std::string reason;       // why `auto` chose the CPU; empty when nothing was passed over
 };
 
-// Whether the CUDA backend runs a whole training step and render on the device. False until every
-// stage of issue 27 is a kernel; then `auto` chooses CUDA wherever a device exists.
-bool cuda_backend_complete();
+// What a command runs on the backend: rendering (d2gs render, eval: the rasterizer's forward) or
+// training steps (d2gs train).
+enum class DeviceWork { Render, Train };
+const char* to_string(DeviceWork work);
 
-// The backend for `request`. `cuda` without a usable device, or while the CUDA backend is incomplete, is a
-// one-line d2gs::Error ("--device cuda: <why>"); `auto` then takes the CPU and fills `reason`.
-DeviceChoice choose_device(DeviceRequest request);
+// Whether the CUDA backend runs `work` on the device: rendering yes (every stage of the rasterizer is a
+// kernel), a training step not yet (issue 27). Where it does, `auto` chooses CUDA wherever a device exists.
+bool cuda_backend_runs(DeviceWork work);
+
+// The backend for `request` and `work`. `cuda` without a usable device, or where the CUDA backend does not
+// run `work`, is a one-line d2gs::Error ("--device cuda: <why>"); `auto` then takes the CPU and fills `reason`.
+DeviceChoice choose_device(DeviceRequest request, DeviceWork work);
+
+// The rasterizer of `choice`: the CPU reference, or the CUDA backend's kernels on device 0
+// (render/kernels/kernel_rasterizer.hpp).
+std::unique_ptr<Rasterizer> make_rasterizer(const DeviceChoice& choice);
 
 // The CPU backend in words: its tile-loop level and OpenMP thread count.
 std::string describe_cpu_backend();

@@ -179,9 +179,9 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
   s.cfg = std::move(config);
   s.method = make_training_method(s.cfg);
   // --device: `cuda` that cannot be had is an error before anything is read or written; `auto` says why it
-  // took the CPU. Every stage below is the CPU backend's: choose_device returns the CPU until the CUDA
-  // backend runs a whole step (render/device_choice.hpp).
-  s.device = render::choose_device(s.cfg.device);  // said in the log once the inputs are checked (below)
+  // took the CPU. Every stage below is the CPU backend's: choose_device returns the CPU for a training step
+  // until the CUDA backend runs a whole step (render/device_choice.hpp).
+  s.device = render::choose_device(s.cfg.device, render::DeviceWork::Train);  // said in the log once the inputs are checked (below)
   const bool resuming = !resume_from.empty();
   std::error_code ec;
   if (fs::exists(s.cfg.model_dir, ec) && !fs::is_directory(s.cfg.model_dir, ec))

@@ -1,0 +1,20 @@
+#pragma once
+// The Rasterizer interface (render/rasterizer.hpp) over a StageRunner: the CUDA backend's kernels as a
+// whole renderer, forward and backward. On the GPU (render/cuda/rasterizer.hpp: make_cuda_rasterizer) it
+// is what `d2gs render --device cuda` and `d2gs eval --device cuda` use; over the emulated stages it runs
+// the same host code and kernel bodies on the CPU, which the tests compare with the CPU rasterizer.
+// Each forward() uploads the model and downloads the images and radii; each backward() uploads the image
+// gradients and downloads the model gradients (a training step that keeps everything on the device is
+// still to come, issue 27).
+#include <memory>
+
+#include "d2gs/render/kernels/stages.hpp"
+#include "d2gs/render/rasterizer.hpp"
+
+namespace d2gs::render::kernels {
+
+// fused_multiply_add: whether compositing fuses its per-pixel multiply-adds (the GPU's natural choice;
+// the CPU's tile loops fuse at x86-64-v3 and above, not at the SSE2 baseline).
+std::unique_ptr<Rasterizer> make_kernel_rasterizer(std::unique_ptr<StageRunner> stages, bool fused_multiply_add);
+
+}  // namespace d2gs::render::kernels
