@@ -11,19 +11,6 @@
 namespace d2gs {
 namespace {
 
-float max_scale(const Gaussians& g, std::size_t i) {
-  return std::exp(std::max({g.log_scales[i * 3], g.log_scales[i * 3 + 1], g.log_scales[i * 3 + 2]}));
-}
-
-// Rotation matrix (row-major) of the normalised quaternion (w, x, y, z).
-void rotation(const float* q, float R[9]) {
-  const float n = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
-  const float w = q[0] / n, x = q[1] / n, y = q[2] / n, z = q[3] / n;
-  R[0] = 1 - 2 * (y * y + z * z); R[1] = 2 * (x * y - w * z);     R[2] = 2 * (x * z + w * y);
-  R[3] = 2 * (x * y + w * z);     R[4] = 1 - 2 * (x * x + z * z); R[5] = 2 * (y * z - w * x);
-  R[6] = 2 * (x * z - w * y);     R[7] = 2 * (y * z + w * x);     R[8] = 1 - 2 * (x * x + y * y);
-}
-
 void append_zero_moments(AdamState& adam, std::size_t count) {
   Gaussians zeros;
   zeros.resize(count, adam.exp_avg.sh_degree);
@@ -66,7 +53,7 @@ void GradientStats::add(const std::vector<float>& grad, const std::vector<int>& 
 
 std::vector<float> GradientStats::mean() const {
   std::vector<float> m(sum_.size(), 0.0f);
-  for (std::size_t i = 0; i < m.size(); ++i) m[i] = count_[i] > 0 ? sum_[i] / count_[i] : 0.0f;
+  for (std::size_t i = 0; i < m.size(); ++i) m[i] = gradient_stat_mean(sum_[i], count_[i]);
   return m;
 }
 
@@ -82,8 +69,9 @@ DensifyReport densify_and_prune(Gaussians& model, AdamState& adam, GradientStats
 
   std::vector<std::uint32_t> clone_idx, split_idx;
   for (std::size_t i = 0; i < n; ++i) {
-    if (!(grads[i] >= opt.grad_threshold)) continue;
-    (max_scale(model, i) <= size_limit ? clone_idx : split_idx).push_back(static_cast<std::uint32_t>(i));
+    if (!densify_selected(grads[i], opt.grad_threshold)) continue;
+    (densify_clones(&model.log_scales[i * 3], size_limit) ? clone_idx : split_idx)
+        .push_back(static_cast<std::uint32_t>(i));
   }
 
   // Split children: parent mean + R(parent)·(scale ⊙ n), n ~ N(0, I); scale / (0.8·children).
@@ -91,16 +79,14 @@ DensifyReport densify_and_prune(Gaussians& model, AdamState& adam, GradientStats
   Gaussians children;
   children.resize(0, model.sh_degree);
   std::vector<std::uint32_t> child_source;
-  const float shrink = std::log(0.8f * static_cast<float>(opt.split_children));
+  const float shrink = split_log_shrink(opt.split_children);
   for (int copy = 0; copy < opt.split_children; ++copy) {
     Gaussians c = parents;
     for (std::size_t k = 0; k < c.size(); ++k) {
-      float R[9];
-      rotation(&c.quats[k * 4], R);
-      float s[3];
-      for (int d = 0; d < 3; ++d) s[d] = std::exp(c.log_scales[k * 3 + d]) * static_cast<float>(rng.normal());
-      for (int r = 0; r < 3; ++r) c.means[k * 3 + r] += R[r * 3] * s[0] + R[r * 3 + 1] * s[1] + R[r * 3 + 2] * s[2];
-      for (int d = 0; d < 3; ++d) c.log_scales[k * 3 + d] -= shrink;
+      float normal[3];
+      for (int d = 0; d < 3; ++d) normal[d] = static_cast<float>(rng.normal());
+      split_child(&parents.means[k * 3], &parents.log_scales[k * 3], &parents.quats[k * 4], normal, shrink,
+                  &c.means[k * 3], &c.log_scales[k * 3]);
     }
     append_rows(children, c);
     child_source.insert(child_source.end(), split_idx.begin(), split_idx.end());
@@ -119,7 +105,7 @@ DensifyReport densify_and_prune(Gaussians& model, AdamState& adam, GradientStats
   for (auto i : split_idx) keep[i] = 0;
   std::size_t pruned = 0;
   for (std::size_t i = 0; i < model.size(); ++i) {
-    if (keep[i] && sigmoid(model.opacity_logits[i]) < opt.min_opacity) {
+    if (keep[i] && densify_prunes(model.opacity_logits[i], opt.min_opacity)) {
       keep[i] = 0;
       ++pruned;
     }
@@ -142,7 +128,7 @@ DensifyReport prune_by_opacity(Gaussians& model, AdamState& adam, GradientStats&
   std::vector<std::uint32_t> source(model.size());
   for (std::size_t i = 0; i < model.size(); ++i) {
     source[i] = static_cast<std::uint32_t>(i);
-    if (sigmoid(model.opacity_logits[i]) < min_opacity) {
+    if (densify_prunes(model.opacity_logits[i], min_opacity)) {
       keep[i] = 0;
       ++report.pruned;
     }

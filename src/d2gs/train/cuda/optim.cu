@@ -1,8 +1,9 @@
 // Adam, the L1, SSIM and DAFE losses, DD-Drop's probabilities, the dropout masks and the densification
-// statistic kernels on the GPU: the bodies of train/kernels/ through kernel_shell, their host side
+// statistic and edit kernels on the GPU: the bodies of train/kernels/ through kernel_shell, their host side
 // (train/kernels/*_pipeline.hpp) over device memory and CUB.
 #include "d2gs/render/cuda/device.hpp"
 #include "d2gs/render/cuda/device_backend.cuh"
+#include "d2gs/train/kernels/densify_pipeline.hpp"
 #include "d2gs/train/kernels/optim.hpp"
 #include "d2gs/train/kernels/optim_pipeline.hpp"
 #include "d2gs/train/kernels/per_gaussian_pipeline.hpp"
@@ -81,6 +82,20 @@ double device_dafe_loss(const float* a, const float* b, int width, int height, i
   if (cuda::device_count() == 0) fail("CUDA: {}", cuda::describe_device());
   cuda::DeviceBackend backend;
   return dafe_loss(backend, a, b, width, height, channels, mask, form, grad, scale);
+}
+
+DensifyReport device_densify_and_prune(Gaussians& model, AdamState& adam, GradientStats& stats, float scene_extent,
+                                       const DensifyOptions& options, Rng& rng) {
+  if (cuda::device_count() == 0) fail("CUDA: {}", cuda::describe_device());
+  cuda::DeviceBackend backend;
+  return DensifyPipeline<cuda::DeviceBackend>(backend).densify_and_prune(model, adam, stats, scene_extent, options,
+                                                                         rng);
+}
+
+DensifyReport device_prune_by_opacity(Gaussians& model, AdamState& adam, GradientStats& stats, float min_opacity) {
+  if (cuda::device_count() == 0) fail("CUDA: {}", cuda::describe_device());
+  cuda::DeviceBackend backend;
+  return DensifyPipeline<cuda::DeviceBackend>(backend).prune_by_opacity(model, adam, stats, min_opacity);
 }
 
 }  // namespace d2gs::train_kernels

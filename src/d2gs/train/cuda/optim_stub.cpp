@@ -43,4 +43,11 @@ double device_dafe_loss(const float*, const float*, int, int, int, const std::ve
   fail("CUDA: {}", cuda::describe_device());
 }
 
+DensifyReport device_densify_and_prune(Gaussians&, AdamState&, GradientStats&, float, const DensifyOptions&, Rng&) {
+  fail("CUDA: {}", cuda::describe_device());
+}
+DensifyReport device_prune_by_opacity(Gaussians&, AdamState&, GradientStats&, float) {
+  fail("CUDA: {}", cuda::describe_device());
+}
+
 }  // namespace d2gs::train_kernels

@@ -1,6 +1,7 @@
 // Adam, the L1, SSIM and DAFE losses, DD-Drop's probabilities, the dropout masks and the densification
-// statistic kernels through the CPU emulator (every build; CI runs them without a GPU).
+// statistic and edit kernels through the CPU emulator (every build; CI runs them without a GPU).
 #include "d2gs/render/kernels/host_backend.hpp"
+#include "d2gs/train/kernels/densify_pipeline.hpp"
 #include "d2gs/train/kernels/optim.hpp"
 #include "d2gs/train/kernels/optim_pipeline.hpp"
 #include "d2gs/train/kernels/per_gaussian_pipeline.hpp"
@@ -75,6 +76,19 @@ double emulated_dafe_loss(const float* a, const float* b, int width, int height,
                           render::kernels::emulate::Schedule schedule) {
   render::kernels::emulate::HostBackend backend{schedule};
   return dafe_loss(backend, a, b, width, height, channels, mask, form, grad, scale);
+}
+
+DensifyReport emulated_densify_and_prune(Gaussians& model, AdamState& adam, GradientStats& stats, float scene_extent,
+                                         const DensifyOptions& options, Rng& rng,
+                                         render::kernels::emulate::Schedule schedule) {
+  render::kernels::emulate::HostBackend backend{schedule};
+  return DensifyPipeline(backend).densify_and_prune(model, adam, stats, scene_extent, options, rng);
+}
+
+DensifyReport emulated_prune_by_opacity(Gaussians& model, AdamState& adam, GradientStats& stats, float min_opacity,
+                                        render::kernels::emulate::Schedule schedule) {
+  render::kernels::emulate::HostBackend backend{schedule};
+  return DensifyPipeline(backend).prune_by_opacity(model, adam, stats, min_opacity);
 }
 
 }  // namespace d2gs::train_kernels

@@ -2,10 +2,10 @@
 // The training step's kernels outside the rasterizer: Adam (adam_kernels.hpp), the L1 loss with its
 // gradient (l1_kernels.hpp), SSIM with its gradient (ssim_kernels.hpp), DAFE with its gradient
 // (dafe_kernels.hpp), DD-Drop's probabilities (dd_drop_kernels.hpp), the dropout masks
-// (dropout_kernels.hpp) and the densification statistic (densify_kernels.hpp): through the CPU emulator
+// (dropout_kernels.hpp), the densification statistic and edits (densify_kernels.hpp): through the CPU emulator
 // (render/kernels/emulate.hpp) in every build, and on the GPU (train/cuda/optim.cu) when there is one.
 // Same arguments and results as Adam::step, l1_loss, Ssim<float>, dafe_loss, dd_drop_probabilities,
-// dropgaussian_mask, bernoulli_mask and GradientStats::add; host arrays in and out.
+// dropgaussian_mask, bernoulli_mask, GradientStats::add, densify_and_prune and prune_by_opacity; host arrays in and out.
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -63,6 +63,14 @@ double emulated_dafe_loss(const float* a, const float* b, int width, int height,
 void emulated_add_gradient_stats(GradientStats& stats, const std::vector<float>& grad_mean2d_ndc,
                                  const std::vector<int>& radii,
                                  render::kernels::emulate::Schedule schedule = render::kernels::emulate::Schedule::Forward);
+// densify_and_prune and prune_by_opacity (densify_pipeline.hpp): the same model, moments, statistics,
+// report and rng state as the CPU's.
+DensifyReport emulated_densify_and_prune(
+    Gaussians& model, AdamState& adam, GradientStats& stats, float scene_extent, const DensifyOptions& options,
+    Rng& rng, render::kernels::emulate::Schedule schedule = render::kernels::emulate::Schedule::Forward);
+DensifyReport emulated_prune_by_opacity(
+    Gaussians& model, AdamState& adam, GradientStats& stats, float min_opacity,
+    render::kernels::emulate::Schedule schedule = render::kernels::emulate::Schedule::Forward);
 
 // The same on the GPU; d2gs::Error without one.
 void device_adam_step(Gaussians& model, const Gaussians& grads, AdamState& state, const LearningRates& lr,
@@ -85,5 +93,8 @@ void device_dd_drop_mask(const Gaussians& model, const Camera& camera, const std
 double device_dafe_loss(const float* a, const float* b, int width, int height, int channels,
                         const std::vector<std::uint8_t>& mask, DafeLossForm form, float* grad = nullptr,
                         float scale = 1.0f);
+DensifyReport device_densify_and_prune(Gaussians& model, AdamState& adam, GradientStats& stats, float scene_extent,
+                                       const DensifyOptions& options, Rng& rng);
+DensifyReport device_prune_by_opacity(Gaussians& model, AdamState& adam, GradientStats& stats, float min_opacity);
 
 }  // namespace d2gs::train_kernels
