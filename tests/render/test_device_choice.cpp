@@ -49,7 +49,7 @@ TEST(DeviceChoice, AutoFallsBackToTheCpuAndSaysWhy) {
 }
 
 TEST(DeviceChoice, CudaThatCannotBeHadIsAOneLineError) {
-  if (cuda_usable()) GTEST_SKIP() << "CUDA is usable here";
+  if (cuda::device_count() > 0) GTEST_SKIP() << "a GPU is here: --device cuda is accepted";
   std::string message;
   try {
     render::choose_device(render::DeviceRequest::Cuda, render::DeviceWork::Train);
@@ -60,6 +60,19 @@ TEST(DeviceChoice, CudaThatCannotBeHadIsAOneLineError) {
   EXPECT_EQ(message.rfind("--device cuda: ", 0), 0u) << message;
   EXPECT_EQ(message.find('\n'), std::string::npos) << message;
   EXPECT_NE(message.find("use --device cpu or auto"), std::string::npos) << message;
+}
+
+// Training with --device cuda on a GPU: the rasterizer there, the rest of the step on the CPU, said so.
+TEST(DeviceChoice, CudaTrainingIsTheRasterizerOnTheGpu) {
+  if (cuda::device_count() == 0) GTEST_SKIP() << cuda::describe_device();
+  const render::DeviceChoice c = render::choose_device(render::DeviceRequest::Cuda, render::DeviceWork::Train);
+  EXPECT_EQ(c.device, render::Device::Cuda);
+  EXPECT_NE(c.description.find("for the rasterizer; the losses, Adam and densification on the CPU"), std::string::npos)
+      << c.description;
+  // auto still takes the CPU for training, and says why.
+  const render::DeviceChoice a = render::choose_device(render::DeviceRequest::Auto, render::DeviceWork::Train);
+  EXPECT_EQ(a.device, render::Device::Cpu);
+  EXPECT_FALSE(a.reason.empty());
 }
 
 TEST(DeviceChoice, RequestsParseAndPrint) {
@@ -75,7 +88,7 @@ TEST(DeviceChoice, RequestsParseAndPrint) {
 // d2gs train/render/eval: cuda fails before anything is read or written; auto trains on the CPU, logs why,
 // and config.json / results.json record the request and the backend used.
 TEST(DeviceCli, TrainRenderEvalTakeTheFlag) {
-  if (cuda_usable()) GTEST_SKIP() << "CUDA is usable here";
+  if (cuda::device_count() > 0) GTEST_SKIP() << "a GPU is here: --device cuda is accepted";
   const auto dir = test::scratch_dir();
   const auto refused = test::run_cli(fmt::format("train -s '{}' -m '{}' -r 8 --n-views 3 --init random --iterations 2 --device cuda",
                                                  fern(), (dir / "refused").string()));
@@ -101,15 +114,9 @@ TEST(DeviceCli, TrainRenderEvalTakeTheFlag) {
                                                (dir / "run/config.json").string(), (dir / "again").string()));
   EXPECT_EQ(again.exit_code, 0) << again.output;
 
-  // Rendering runs on the CUDA backend wherever a device exists; without one, cuda is refused.
-  const bool renders_on_cuda = cuda_usable(render::DeviceWork::Render);
   const auto eval_cuda = test::run_cli(fmt::format("-q eval -m '{}' --device cuda", (dir / "run").string()));
-  if (renders_on_cuda) {
-    EXPECT_EQ(eval_cuda.exit_code, 0) << eval_cuda.output;
-  } else {
-    EXPECT_EQ(eval_cuda.exit_code, 1) << eval_cuda.output;
-    EXPECT_NE(eval_cuda.output.find("--device cuda: "), std::string::npos) << eval_cuda.output;
-  }
+  EXPECT_EQ(eval_cuda.exit_code, 1) << eval_cuda.output;
+  EXPECT_NE(eval_cuda.output.find("--device cuda: "), std::string::npos) << eval_cuda.output;
   const auto eval_cpu = test::run_cli(fmt::format("-q eval -m '{}' --device cpu --json", (dir / "run").string()));
   ASSERT_EQ(eval_cpu.exit_code, 0) << eval_cpu.output;
   EXPECT_EQ(nlohmann::json::parse(eval_cpu.output)["device"], "cpu");
@@ -117,13 +124,9 @@ TEST(DeviceCli, TrainRenderEvalTakeTheFlag) {
   const auto render_cuda = test::run_cli(fmt::format("-q render -m '{}' -s '{}' -r 8 --n-views 3 -o '{}' --device cuda",
                                                      (dir / "run/point_cloud/iteration_2/point_cloud.ply").string(), fern(),
                                                      (dir / "renders").string()));
-  if (renders_on_cuda) {
-    EXPECT_EQ(render_cuda.exit_code, 0) << render_cuda.output;
-  } else {
-    EXPECT_EQ(render_cuda.exit_code, 1) << render_cuda.output;
-    EXPECT_NE(render_cuda.output.find("--device cuda: "), std::string::npos) << render_cuda.output;
-    EXPECT_FALSE(fs::exists(dir / "renders"));
-  }
+  EXPECT_EQ(render_cuda.exit_code, 1) << render_cuda.output;
+  EXPECT_NE(render_cuda.output.find("--device cuda: "), std::string::npos) << render_cuda.output;
+  EXPECT_FALSE(fs::exists(dir / "renders"));
 }
 
 // d2gs info without a scene: the backend --device auto would use, as a table and as JSON.

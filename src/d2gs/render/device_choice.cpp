@@ -61,6 +61,11 @@ DeviceChoice choose_device(DeviceRequest request, DeviceWork work) {
     why = fmt::format("{} found, but the CUDA backend does not yet run {} (docs/architecture.md)",
                       cuda::describe_device(), to_string(work));
   if (why.empty()) return {Device::Cuda, "CUDA " + cuda::describe_device(), ""};
+  if (request == DeviceRequest::Cuda && cuda::device_count() > 0)  // a training step, asked for by name
+    return {Device::Cuda,
+            "CUDA " + cuda::describe_device() +
+                " for the rasterizer; the losses, Adam and densification on the CPU (issue 27)",
+            ""};
   if (request == DeviceRequest::Cuda) fail("--device cuda: {}; use --device cpu or auto", why);
   cpu_choice.reason = why;
   return cpu_choice;

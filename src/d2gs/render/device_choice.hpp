@@ -3,7 +3,9 @@
 // `d2gs info` reports. The CPU backend is the reference and runs everything. The CUDA backend
 // (render/cuda/, render/kernels/) renders, forward and backward, on the device; it does not yet run a
 // whole training step (docs/architecture.md, "CUDA backend and its CPU emulation"). Until it does,
-// `train --device cuda` is refused with the reason and `train --device auto` takes the CPU and says why.
+// `train --device cuda` rasterizes on the GPU and does the rest of each step (losses, Adam, densification)
+// on the CPU, with the images and gradients crossing over every iteration, and `train --device auto` takes
+// the CPU and says why.
 #include <memory>
 #include <string>
 #include <string_view>
@@ -32,12 +34,15 @@ struct DeviceChoice {
 enum class DeviceWork { Render, Train };
 const char* to_string(DeviceWork work);
 
-// Whether the CUDA backend runs `work` on the device: rendering yes (every stage of the rasterizer is a
-// kernel), a training step not yet (issue 27). Where it does, `auto` chooses CUDA wherever a device exists.
+// Whether the CUDA backend runs `work` wholly on the device: rendering yes (every stage of the rasterizer
+// is a kernel), a training step not yet (issue 27). Where it does, `auto` chooses CUDA wherever a device
+// exists.
 bool cuda_backend_runs(DeviceWork work);
 
-// The backend for `request` and `work`. `cuda` without a usable device, or where the CUDA backend does not
-// run `work`, is a one-line d2gs::Error ("--device cuda: <why>"); `auto` then takes the CPU and fills `reason`.
+// The backend for `request` and `work`. `cuda` without a usable device is a one-line d2gs::Error
+// ("--device cuda: <why>"); `cuda` for a training step, which the backend does not run wholly, is the
+// rasterizer on the device and the rest on the CPU (the description says so). `auto` takes CUDA only
+// where the backend runs `work` wholly; else the CPU, with `reason`.
 DeviceChoice choose_device(DeviceRequest request, DeviceWork work);
 
 // The rasterizer of `choice`: the CPU reference, or the CUDA backend's kernels on device 0

@@ -21,6 +21,7 @@
 #include "d2gs/geometry/training_geometry.hpp"
 #include "d2gs/model/ply.hpp"
 #include "d2gs/render/activations.hpp"
+#include "d2gs/render/device_choice.hpp"
 #include "d2gs/render/rasterizer.hpp"
 #include "d2gs/train/checkpoint.hpp"
 #include "d2gs/train/densify.hpp"
@@ -179,8 +180,8 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
   s.cfg = std::move(config);
   s.method = make_training_method(s.cfg);
   // --device: `cuda` that cannot be had is an error before anything is read or written; `auto` says why it
-  // took the CPU. Every stage below is the CPU backend's: choose_device returns the CPU for a training step
-  // until the CUDA backend runs a whole step (render/device_choice.hpp).
+  // took the CPU. With `cuda` the rasterizer runs on the GPU and every other stage on the CPU, until the
+  // CUDA backend runs a whole step (render/device_choice.hpp).
   s.device = render::choose_device(s.cfg.device, render::DeviceWork::Train);  // said in the log once the inputs are checked (below)
   const bool resuming = !resume_from.empty();
   std::error_code ec;
@@ -223,7 +224,7 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
   for (const Image& image : s.train_images)
     s.ssim_refs.push_back(s.ssim.reference(image.pixels.data(), image.width, image.height, image.channels));
   s.extent = compute_scene_extent(s.scene, s.split.train);
-  s.rasterizer = render::make_cpu_rasterizer();
+  s.rasterizer = render::make_rasterizer(s.device);
   s.rng_cameras = Rng::stream(s.cfg.seed, "cameras");
   s.rng_dropout = Rng::stream(s.cfg.seed, "dropout");
   s.rng_densify = Rng::stream(s.cfg.seed, "densify");
@@ -275,6 +276,7 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
     write_point_cloud_ply(s.out() / "input.ply", init);
   }
   if (!s.device.reason.empty()) spdlog::info("--device auto: using the {}: {}", s.device.description, s.device.reason);
+  if (s.device.device == render::Device::Cuda) spdlog::info("device: {}", s.device.description);
   write_run_config(s.out(), s.cfg, s.scene, s.split, s.extent, s.oracle_init, s.device.device);
   write_cameras_json(s.out(), s.scene, s.split);
   s.log.open(s.out() / "train_log.jsonl", s.iteration > 0 ? std::ios::app : std::ios::trunc);
