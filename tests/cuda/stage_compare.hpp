@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "d2gs/render/cpu/binning.hpp"
+#include "d2gs/render/cpu/composite_tiles.hpp"
 #include "d2gs/render/cpu/projection.hpp"
 #include "d2gs/render/cpu/sh.hpp"
 #include "d2gs/render/kernels/stages.hpp"
@@ -60,6 +61,29 @@ inline Diff diff(const float* a, const float* b, std::size_t n) {
     d.max_abs = std::max(d.max_abs, std::isnan(e) ? INFINITY : e);
   }
   return d;
+}
+
+// Whether the CPU tile loops in use fuse their multiply-adds (x86-64-v3 and above do; the SSE2 baseline does not).
+inline bool cpu_level_fuses() { return std::string(render::cpu::tile_kernels_float().isa) != "baseline"; }
+
+// How far `got` lies from `want` over n values: the L2 norm of the difference relative to want's, and the
+// largest difference relative to want's largest value (NaN counts as infinitely far).
+struct Closeness {
+  double rel_l2 = 0, rel_max = 0;
+};
+inline Closeness closeness(const std::vector<float>& got, const std::vector<float>& want, std::size_t n) {
+  double num = 0, den = 0, max_diff = 0, max_ref = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const double w = want[i], e = double(got[i]) - w;
+    num += e * e;
+    den += w * w;
+    max_diff = std::max(max_diff, std::isnan(e) ? INFINITY : std::abs(e));
+    max_ref = std::max(max_ref, std::abs(w));
+  }
+  Closeness c;
+  c.rel_l2 = den > 0 ? std::sqrt(num / den) : (num > 0 ? INFINITY : 0.0);
+  c.rel_max = max_ref > 0 ? max_diff / max_ref : (max_diff > 0 ? INFINITY : 0.0);
+  return c;
 }
 
 // Random dL/d(projected quantities), as compositing's backward would hand them over.

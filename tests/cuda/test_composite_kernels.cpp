@@ -55,8 +55,6 @@ private:
   std::string saved_;
 };
 
-bool cpu_level_fuses() { return std::string(render::cpu::tile_kernels_float().isa) != "baseline"; }
-
 // Random dL/d(rgb, alpha, depth) per pixel; an empty vector stands for a null pointer.
 struct PixelGrads {
   std::vector<float> rgb, alpha, depth;
@@ -121,24 +119,6 @@ std::size_t expect_forward_bitwise(const CompositeStages& k, const CpuComposite&
   EXPECT_EQ(t.bit_mismatches, 0u) << label << " final T, max |diff| " << t.max_abs;
   EXPECT_EQ(contrib, 0u) << label << " last contributors";
   return rgb.bit_mismatches + alpha.bit_mismatches + depth.bit_mismatches + t.bit_mismatches + contrib;
-}
-
-struct Closeness {
-  double rel_l2 = 0, rel_max = 0;
-};
-Closeness closeness(const std::vector<float>& got, const std::vector<float>& want, std::size_t n) {
-  double num = 0, den = 0, max_diff = 0, max_ref = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    const double w = want[i], e = double(got[i]) - w;
-    num += e * e;
-    den += w * w;
-    max_diff = std::max(max_diff, std::isnan(e) ? INFINITY : std::abs(e));
-    max_ref = std::max(max_ref, std::abs(w));
-  }
-  Closeness c;
-  c.rel_l2 = den > 0 ? std::sqrt(num / den) : (num > 0 ? INFINITY : 0.0);
-  c.rel_max = max_ref > 0 ? max_diff / max_ref : (max_diff > 0 ? INFINITY : 0.0);
-  return c;
 }
 
 // Compositing's gradients against the CPU's; prints the measures.

@@ -34,8 +34,6 @@ namespace {
 
 namespace emulate = render::kernels::emulate;
 namespace tk = train_kernels;
-constexpr emulate::Schedule kSchedules[] = {emulate::Schedule::Forward, emulate::Schedule::Reverse,
-                                            emulate::Schedule::SyncVisibility};
 
 // The index of the first value whose bits differ, or -1.
 long long first_difference(const std::vector<float>& a, const std::vector<float>& b) {
@@ -231,13 +229,13 @@ auto emulated_probabilities(emulate::Schedule schedule) {
 }
 
 TEST(EmulatedKernels, DdDropProbabilitiesEqualTheCpuBitForBit) {
-  for (auto schedule : kSchedules)
+  for (auto schedule : emulate::kAllSchedules)
     expect_random_probabilities_equal(emulated_probabilities(schedule), "emulated",
                                       schedule == emulate::Schedule::Forward);
 }
 
 TEST(EmulatedKernels, DdDropProbabilitiesWithTiedAndSignedZeroDepthsEqualTheCpu) {
-  for (auto schedule : kSchedules) expect_tied_probabilities_equal(emulated_probabilities(schedule), "emulated");
+  for (auto schedule : emulate::kAllSchedules) expect_tied_probabilities_equal(emulated_probabilities(schedule), "emulated");
 }
 
 TEST(EmulatedKernels, DdDropProbabilitiesOnFernEqualTheCpuBitForBit) {
@@ -359,7 +357,7 @@ auto emulated_dafe(emulate::Schedule schedule) {
 }
 
 TEST(EmulatedKernels, DafeLossEqualsTheCpu) {
-  for (auto schedule : kSchedules) expect_random_dafe_equal(emulated_dafe(schedule), "emulated");
+  for (auto schedule : emulate::kAllSchedules) expect_random_dafe_equal(emulated_dafe(schedule), "emulated");
   const DafeCase c = random_case(8, 8, 3, 0.5, 3);
   EXPECT_THROW(tk::emulated_dafe_loss(c.a.data(), c.b.data(), 8, 7, 3, c.mask, DafeLossForm::Release), Error);
 }

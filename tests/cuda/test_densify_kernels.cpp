@@ -23,8 +23,6 @@ namespace {
 
 namespace emulate = render::kernels::emulate;
 namespace tk = train_kernels;
-constexpr emulate::Schedule kSchedules[] = {emulate::Schedule::Forward, emulate::Schedule::Reverse,
-                                            emulate::Schedule::SyncVisibility};
 
 struct Case {
   Gaussians model;
@@ -201,7 +199,7 @@ Case fern_case(float& extent) {
 }
 
 TEST(EmulatedDensify, EqualsTheCpuBitForBit) {
-  for (auto s : kSchedules) run_cases(emulated(s), emulated_prune(s), "schedule " + std::to_string(static_cast<int>(s)));
+  for (auto s : emulate::kAllSchedules) run_cases(emulated(s), emulated_prune(s), "schedule " + std::to_string(static_cast<int>(s)));
 }
 
 TEST(EmulatedDensify, FernSizedEqualsTheCpuBitForBit) {

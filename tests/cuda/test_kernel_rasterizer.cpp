@@ -14,7 +14,6 @@
 #include <vector>
 
 #include "cuda/stage_compare.hpp"
-#include "d2gs/render/cpu/composite_tiles.hpp"
 #include "d2gs/render/cuda/device.hpp"
 #include "d2gs/render/cuda/stages.hpp"
 #include "d2gs/render/device_choice.hpp"
@@ -23,8 +22,6 @@
 
 namespace d2gs::test {
 namespace {
-
-bool cpu_level_fuses() { return std::string(render::cpu::tile_kernels_float().isa) != "baseline"; }
 
 Gaussians to_gaussians(const TestModel<float>& m) {
   Gaussians g;
@@ -38,23 +35,12 @@ Gaussians to_gaussians(const TestModel<float>& m) {
   return g;
 }
 
+// Relative L2 distance and largest absolute difference (stage_compare.hpp's measures).
 double rel_l2(const std::vector<float>& got, const std::vector<float>& want) {
-  double num = 0, den = 0;
-  for (std::size_t i = 0; i < want.size(); ++i) {
-    const double d = double(got[i]) - double(want[i]);
-    num += d * d;
-    den += double(want[i]) * double(want[i]);
-  }
-  return den > 0 ? std::sqrt(num / den) : std::sqrt(num);
+  return closeness(got, want, want.size()).rel_l2;
 }
-
 double max_abs_diff(const std::vector<float>& got, const std::vector<float>& want) {
-  double m = 0;
-  for (std::size_t i = 0; i < want.size(); ++i) {
-    const double d = std::abs(double(got[i]) - double(want[i]));
-    m = std::max(m, std::isnan(d) ? INFINITY : d);
-  }
-  return m;
+  return diff(got.data(), want.data(), want.size()).max_abs;
 }
 
 struct Scene {

@@ -41,8 +41,6 @@ void expect_bit_equal(const Gaussians& a, const Gaussians& b, const char* what) 
 }
 
 namespace emulate = render::kernels::emulate;
-constexpr emulate::Schedule kSchedules[] = {emulate::Schedule::Forward, emulate::Schedule::Reverse,
-                                            emulate::Schedule::SyncVisibility};
 
 template <class AdamStep>
 void expect_adam_equal(AdamStep kernel_step) {
@@ -85,14 +83,14 @@ void expect_l1_equal(L1 kernel_l1) {
 }
 
 TEST(EmulatedKernels, AdamEqualsAdamStepBitForBit) {
-  for (auto schedule : kSchedules)
+  for (auto schedule : emulate::kAllSchedules)
     expect_adam_equal([schedule](Gaussians& m, const Gaussians& g, AdamState& s, const LearningRates& lr, float means_lr,
                                  bool skip_opacity) {
       train_kernels::emulated_adam_step(m, g, s, lr, means_lr, skip_opacity, schedule);
     });
 }
 TEST(EmulatedKernels, L1GradientEqualsTheCpuBitForBit) {
-  for (auto schedule : kSchedules)
+  for (auto schedule : emulate::kAllSchedules)
     expect_l1_equal([schedule](const float* a, const float* b, std::size_t count, float* grad, float scale) {
       return train_kernels::emulated_l1_loss(a, b, count, grad, scale, schedule);
     });

@@ -24,8 +24,6 @@ namespace {
 
 namespace emulate = render::kernels::emulate;
 namespace tk = train_kernels;
-constexpr emulate::Schedule kSchedules[] = {emulate::Schedule::Forward, emulate::Schedule::Reverse,
-                                            emulate::Schedule::SyncVisibility};
 
 bool bit_equal(const std::vector<float>& a, const std::vector<float>& b) {
   return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0);
@@ -135,7 +133,7 @@ void expect_gradient_stats_equal(Add kernel_add, const std::string& what) {
 }
 
 TEST(EmulatedKernels, DropGaussianMaskEqualsTheCpuDrawForDraw) {
-  for (auto schedule : kSchedules)
+  for (auto schedule : emulate::kAllSchedules)
     expect_dropgaussian_equal([schedule](std::size_t n, double rate, Rng& rng, std::vector<float>& m) {
       tk::emulated_dropgaussian_mask(n, rate, rng, m, schedule);
     }, "emulated");
@@ -145,7 +143,7 @@ TEST(EmulatedKernels, DropGaussianMaskEqualsTheCpuDrawForDraw) {
 }
 
 TEST(EmulatedKernels, BernoulliMaskEqualsTheCpuDrawForDraw) {
-  for (auto schedule : kSchedules) {
+  for (auto schedule : emulate::kAllSchedules) {
     const auto kernel = [schedule](const std::vector<float>& p, Rng& rng, std::vector<float>& m, bool compensate) {
       tk::emulated_bernoulli_mask(p, rng, m, compensate, schedule);
     };
@@ -163,7 +161,7 @@ TEST(EmulatedKernels, DdDropMaskOnFernEqualsTheCpu) {
 }
 
 TEST(EmulatedKernels, GradientStatsEqualTheCpuBitForBit) {
-  for (auto schedule : kSchedules)
+  for (auto schedule : emulate::kAllSchedules)
     expect_gradient_stats_equal([schedule](GradientStats& s, const std::vector<float>& g, const std::vector<int>& r) {
       tk::emulated_add_gradient_stats(s, g, r, schedule);
     }, "emulated");

@@ -27,6 +27,8 @@
 namespace d2gs::render::kernels::emulate {
 
 enum class Schedule { Forward, Reverse, SyncVisibility };
+// Every schedule, for tests that run a kernel under each.
+inline constexpr Schedule kAllSchedules[] = {Schedule::Forward, Schedule::Reverse, Schedule::SyncVisibility};
 
 template <class T>
 class Reg {
