@@ -1,8 +1,9 @@
 #pragma once
 // The Rasterizer interface (render/rasterizer.hpp) over a StageRunner: the CUDA backend's kernels as a
-// whole renderer, forward and backward. On the GPU (render/cuda/rasterizer.hpp: make_cuda_rasterizer) it
-// is what `d2gs render --device cuda` and `d2gs eval --device cuda` use; over the emulated stages it runs
-// the same host code and kernel bodies on the CPU, which the tests compare with the CPU rasterizer.
+// whole renderer, forward and backward. On the GPU (render::make_rasterizer, render/device_choice.hpp) it
+// is what `d2gs render/eval --device cuda` use, and `d2gs train --device cuda` for its rasterization; over
+// the emulated stages it runs the same host code and kernel bodies on the CPU, which the tests compare
+// with the CPU rasterizer.
 // Each forward() uploads the model and downloads the images and radii; each backward() uploads the image
 // gradients and downloads the model gradients (a training step that keeps everything on the device is
 // still to come, issue 27).
