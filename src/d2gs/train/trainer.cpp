@@ -10,6 +10,7 @@
 #include <set>
 
 #include <nlohmann/json.hpp>
+#include <omp.h>
 #include <spdlog/spdlog.h>
 
 #include "d2gs/core/atomic_file.hpp"
@@ -17,6 +18,7 @@
 #include "d2gs/core/file_lock.hpp"
 #include "d2gs/core/finite.hpp"
 #include "d2gs/core/random.hpp"
+#include "d2gs/core/stage_profile.hpp"
 #include "d2gs/eval/ssim.hpp"
 #include "d2gs/geometry/training_geometry.hpp"
 #include "d2gs/model/ply.hpp"
@@ -297,6 +299,7 @@ bool Trainer::init_is_oracle() const { return s_->oracle_init; }
 IterationRecord Trainer::step() {
   auto& s = *s_;
   const auto& cfg = s.cfg;
+  const profile::Scope profile_step("step");
   const int t = ++s.iteration;
   IterationRecord rec;
   rec.iteration = t;
@@ -321,25 +324,41 @@ IterationRecord Trainer::step() {
   ro.alpha_clamp_pass_through = cfg.alpha_clamp_pass_through;
   const MethodStep method_step{t, view, s.scene.cameras[static_cast<std::size_t>(s.split.train[static_cast<std::size_t>(view)])],
                                s.model, s.rng_dropout, *s.rasterizer, s.train_cameras, ro};
-  s.method->prepare(method_step);
-  const OpacityMultiplier multiplier = s.method->opacity_multiplier(method_step);
+  {
+    const profile::Scope p("method: prepare");
+    s.method->prepare(method_step);
+  }
+  OpacityMultiplier multiplier;
+  {
+    const profile::Scope p("method: opacity multiplier");
+    multiplier = s.method->opacity_multiplier(method_step);
+  }
   rec.drop_fraction = multiplier.drop_fraction;
 
   // Render and loss on the clamped image.
   const auto& out = s.rasterizer->forward(s.model, multiplier.values, s.train_cameras[static_cast<std::size_t>(view)], ro);
   const std::size_t values = out.rgb.size();
   s.pred.resize(values);
-  s.grad_rgb.assign(values, 0.0f);
-  for (std::size_t i = 0; i < values; ++i) s.pred[i] = std::clamp(out.rgb[i], 0.0f, 1.0f);
-  rec.l1 = l1_loss(s.pred.data(), gt.pixels.data(), values, s.grad_rgb.data(), 1.0f);
+  {
+    const profile::Scope p("loss: clamp and L1");
+    s.grad_rgb.assign(values, 0.0f);
+    float* pred = s.pred.data();
+    const float* rgb = out.rgb.data();
+    for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(values); ++i) pred[i] = std::clamp(rgb[i], 0.0f, 1.0f);
+    rec.l1 = l1_loss(s.pred.data(), gt.pixels.data(), values, s.grad_rgb.data(), 1.0f);
+  }
   const Ssim<float>::Reference& gt_stats = s.ssim_refs[static_cast<std::size_t>(view)];
   if (gt_stats.width != out.width || gt_stats.height != out.height || gt_stats.channels != 3)
     fail("iteration {}: the render ({}x{}) and training view {} ({}x{}x{}) differ in size", t, out.width, out.height,
          view, gt_stats.width, gt_stats.height, gt_stats.channels);
-  rec.ssim = s.ssim.evaluate(s.pred.data(), gt_stats, s.grad_rgb.data(), -cfg.lambda_dssim);
+  {
+    const profile::Scope p("loss: SSIM");
+    rec.ssim = s.ssim.evaluate(s.pred.data(), gt_stats, s.grad_rgb.data(), -cfg.lambda_dssim);
+  }
   rec.loss = rec.l1 + cfg.lambda_dssim * (1.0 - rec.ssim);
   // Depth and alpha reach the loss terms, and their gradients the backward, only for a method that uses them.
   const bool depth_terms = s.method->uses_depth();
+  std::optional<profile::Scope> profile_terms(std::in_place, "loss: method's terms");
   if (depth_terms) {
     s.grad_depth.assign(out.depth.size(), 0.0f);
     s.grad_alpha.assign(out.alpha.size(), 0.0f);
@@ -350,13 +369,20 @@ IterationRecord Trainer::step() {
                                               depth_terms ? s.grad_depth.data() : nullptr,
                                               depth_terms ? s.grad_alpha.data() : nullptr});
   for (const LossTerm& term : rec.terms) rec.loss += term.weight * term.value;
-  for (std::size_t i = 0; i < values; ++i)
-    if (out.rgb[i] < 0.0f || out.rgb[i] > 1.0f) s.grad_rgb[i] = 0.0f;  // clamp: no gradient outside [0, 1]
+  profile_terms.reset();
+  {
+    const profile::Scope p("loss: clamp's gradient");
+    float* grad = s.grad_rgb.data();
+    const float* rgb = out.rgb.data();
+    for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(values); ++i)
+      if (rgb[i] < 0.0f || rgb[i] > 1.0f) grad[i] = 0.0f;  // clamp: no gradient outside [0, 1]
+  }
   if (!std::isfinite(rec.loss)) fail("iteration {}: the loss is not finite ({}); stopping", t, rec.loss);
 
   const auto& grads = s.rasterizer->backward(s.grad_rgb.data(), depth_terms ? s.grad_alpha.data() : nullptr,
                                              depth_terms ? s.grad_depth.data() : nullptr);
   {
+    const profile::Scope p("finite checks");
     const auto check = [&](const std::vector<float>& a, const char* name) {
       if (!all_finite(a)) fail("iteration {}: non-finite gradient in {}; stopping", t, name);
     };
@@ -368,18 +394,29 @@ IterationRecord Trainer::step() {
     check(grads.model.sh_rest, "sh_rest");
   }
 
-  if (s.outputs) save_and_test(t);
+  if (s.outputs) {
+    const profile::Scope p("outputs: saves and tests");
+    const profile::Paused inside;  // their renders are not training's
+    save_and_test(t);
+  }
 
   // The method's edits of the parameters (a regulariser's opacity decay), never after the last save.
-  if (t < cfg.iterations) s.method->before_update(t, s.model);
+  if (t < cfg.iterations) {
+    const profile::Scope p("method: before update");
+    s.method->before_update(t, s.model);
+  }
 
   // Densification (before the optimiser step, as the original).
   bool skip_step = false, skip_opacity = false;
   // Nothing changes the model after the last iteration's save, so the final evaluation scores the saved model
   // (train.py would still densify there, after saving, to no effect on anything it writes).
   if (t < cfg.densify_until && t < cfg.iterations) {
-    s.stats.add(grads.grad_mean2d_ndc, out.radii);
+    {
+      const profile::Scope p("densify: statistics");
+      s.stats.add(grads.grad_mean2d_ndc, out.radii);
+    }
     if (t > cfg.densify_from && t % cfg.densify_every == 0) {
+      const profile::Scope p("densify: edits");
       const auto report = densify_and_prune(s.model, s.adam, s.stats, s.extent, cfg.densify, s.rng_densify);
       s.method->after_densify(report);
       skip_step = true;  // the new tensors carry no gradient this iteration
@@ -391,9 +428,12 @@ IterationRecord Trainer::step() {
       skip_opacity = true;
     }
   }
-  if (t < cfg.iterations && !skip_step)
+  if (t < cfg.iterations && !skip_step) {
+    const profile::Scope p("Adam");
     Adam::step(s.model, grads.model, s.adam, cfg.lr, means_lr, skip_opacity);
+  }
 
+  const profile::Scope profile_checks("parameter checks and log");
   for (const auto* a : {&s.model.means, &s.model.log_scales, &s.model.quats, &s.model.opacity_logits})
     if (!all_finite(*a)) fail("iteration {}: a model parameter became non-finite; stopping", t);
 
@@ -460,6 +500,7 @@ void Trainer::run() {
   const int start = s.iteration;
   TrainingProgress progress(cfg.method, start, cfg.iterations, cfg.quiet);
   s.outputs = true;  // saves and test metrics, from step()
+  profile::reset();
   while (s.iteration < cfg.iterations) {
     const IterationRecord rec = step();
     const int t = rec.iteration;
@@ -468,6 +509,12 @@ void Trainer::run() {
   }
   s.outputs = false;
   progress.finish();
+  if (profile::enabled()) {
+    const std::string table = profile::format_table(profile::totals(), "step");
+    if (!table.empty())  // asked for by the environment: printed even with --quiet
+      std::fprintf(stderr, "D2GS_PROFILE: wall time per stage, iterations %d-%d, %d OpenMP threads\n%s", start + 1,
+                   cfg.iterations, omp_get_max_threads(), table.c_str());
+  }
   // Resumed from the checkpoint of the run's last iteration (check_resume allows no other at that
   // iteration): nothing to train, and the model is the final one, since the last iteration changes nothing
   // after its save. Save it where that save is missing, so that results.json names a model that exists.

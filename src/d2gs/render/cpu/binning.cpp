@@ -5,7 +5,9 @@
 #include <algorithm>
 #include <array>
 #include <cstring>
+#include <optional>
 
+#include "d2gs/core/stage_profile.hpp"
 #include "d2gs/render/raster_math.hpp"
 
 namespace d2gs::render::cpu {
@@ -80,6 +82,8 @@ void bin_gaussians(const Projected<T>& proj, int width, int height, double alpha
   grow(out.keys, n);
   grow(out.ids, n);
 
+  // Its parts' wall time (core/stage_profile.hpp), each scope ending where the next begins.
+  std::optional<profile::Scope> ps(std::in_place, "render: binning / rectangles");
   // 1. Tile rectangle of every Gaussian (empty when culled or too faint to reach the cutoff).
   const T amin = T(alpha_min);
 #pragma omp parallel for schedule(static)
@@ -110,6 +114,7 @@ void bin_gaussians(const Projected<T>& proj, int width, int height, double alpha
   for (std::size_t i = 0; i < n; ++i) out.rect_offsets[i + 1] += out.rect_offsets[i];
   grow(out.rect_tiles, static_cast<std::size_t>(out.rect_offsets[n]));
 
+  ps.emplace("render: binning / tiles reached");
   // The tiles of each rectangle that the tile loops may visit (raster_math.hpp, tile_reach_columns), in
   // row-major order, at the start of the rectangle's slot of rect_tiles.
 #pragma omp parallel for schedule(static)
@@ -127,6 +132,7 @@ void bin_gaussians(const Projected<T>& proj, int width, int height, double alpha
     out.tile_count[i] = count;
   }
 
+  ps.emplace("render: binning / depth sort");
   // 2. Candidates in index order, then a stable sort by depth.
   std::size_t ranks = 0;
   for (std::size_t i = 0; i < n; ++i) {
@@ -139,6 +145,7 @@ void bin_gaussians(const Projected<T>& proj, int width, int height, double alpha
   radix_sort(out.keys, out.ids, out.keys_tmp, out.ids_tmp, ranks);
   out.ranks = ranks;
 
+  ps.emplace("render: binning / splats");
   // 3. Splats in depth order and the per-rank intersection offsets.
   grow(out.rank_gaussian, ranks);
   grow(out.splats, ranks);
@@ -175,6 +182,7 @@ void bin_gaussians(const Projected<T>& proj, int width, int height, double alpha
   grow(out.isect_rank, m);
   grow(out.tile_offsets, n_tiles + 1);
 
+  ps.emplace("render: binning / tile counts");
   // 4. Tile lists: chunk c of the ranks counts its tiles, offsets are tile-major then chunk-major, and
   // each chunk fills its slots in rank order. Any chunking gives the same layout.
   const int chunks = std::max(1, std::min<int>(omp_get_max_threads(), static_cast<int>(ranks / 1024) + 1));
@@ -201,6 +209,7 @@ void bin_gaussians(const Projected<T>& proj, int width, int height, double alpha
     }
   }
   out.tile_offsets[n_tiles] = offset;
+  ps.emplace("render: binning / tile lists");
 #pragma omp parallel for schedule(static, 1) num_threads(chunks)
   for (int c = 0; c < chunks; ++c) {
     int* cursor = &out.chunk_counts[static_cast<std::size_t>(c) * n_tiles];

@@ -3,6 +3,7 @@
 #include <algorithm>
 
 #include "d2gs/core/error.hpp"
+#include "d2gs/core/stage_profile.hpp"
 #include "d2gs/render/cpu/binning.hpp"
 #include "d2gs/render/cpu/composite.hpp"
 #include "d2gs/render/cpu/projection.hpp"
@@ -47,10 +48,20 @@ void CpuRasterizerCore<T>::forward_into(const ModelView<T>& model, const T* opac
   active_degree_ = options.sh_degree < 0 ? model.sh_degree : std::min(options.sh_degree, model.sh_degree);
   for (int c = 0; c < 3; ++c) background_[c] = static_cast<T>(options.background[c]);
 
-  project_forward(model, opacity_multiplier, camera, projected_);
-  sh_forward(model, active_degree_, camera, projected_);
+  {
+    const profile::Scope p("render: projection");
+    project_forward(model, opacity_multiplier, camera, projected_);
+  }
+  {
+    const profile::Scope p("render: SH");
+    sh_forward(model, active_degree_, camera, projected_);
+  }
   const double alpha_min = options.smooth_cutoff ? kSmoothAlphaLo : kAlphaMin;
-  bin_gaussians(projected_, camera.width, camera.height, alpha_min, binning_);
+  {
+    const profile::Scope p("render: binning");
+    bin_gaussians(projected_, camera.width, camera.height, alpha_min, binning_);
+  }
+  const profile::Scope p("render: compositing");
   composite_forward(binning_, background_, options.smooth_cutoff, rgb, alpha, depth, pixels_);
 }
 
@@ -58,9 +69,13 @@ template <typename T>
 void CpuRasterizerCore<T>::backward(const T* d_rgb, const T* d_alpha, const T* d_depth,
                                     const ModelGradView<T>& grads, T* grad_mean2d_ndc) {
   const std::size_t n = model_.count;
-  composite_backward(binning_, background_, options_.smooth_cutoff, options_.alpha_clamp_pass_through, pixels_, d_rgb, d_alpha, d_depth, n,
-                     isect_grads_, projected_grads_);
+  {
+    const profile::Scope p("backward: compositing");
+    composite_backward(binning_, background_, options_.smooth_cutoff, options_.alpha_clamp_pass_through, pixels_, d_rgb,
+                       d_alpha, d_depth, n, isect_grads_, projected_grads_);
+  }
   if (grad_mean2d_ndc) {
+    const profile::Scope p("backward: NDC gradient");
     const T sx = T(0.5) * T(camera_.width), sy = T(0.5) * T(camera_.height);
 #pragma omp parallel for schedule(static)
     for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(n); ++i) {
@@ -68,7 +83,11 @@ void CpuRasterizerCore<T>::backward(const T* d_rgb, const T* d_alpha, const T* d
       grad_mean2d_ndc[i * 2 + 1] = projected_grads_.mean2d[i * 2 + 1] * sy;
     }
   }
-  project_backward(model_, multiplier_, camera_, projected_, projected_grads_, grads);
+  {
+    const profile::Scope p("backward: projection");
+    project_backward(model_, multiplier_, camera_, projected_, projected_grads_, grads);
+  }
+  const profile::Scope p("backward: SH");
   sh_backward(model_, active_degree_, camera_, projected_, projected_grads_.color.data(), grads);
 }
 
