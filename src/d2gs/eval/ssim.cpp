@@ -188,11 +188,19 @@ T Ssim<T>::evaluate(const T* a, const Reference& ref, T* grad_a, T grad_scale) {
     const T* bp = ref.b.data() + at;
     const T* mu_b = ref.mu_b.data() + at;
     const T* s_bb = ref.s_bb.data() + at;
-    for (std::size_t i = 0; i < n; ++i) a_[i] = a[i * channels + c];
-    for (std::size_t i = 0; i < n; ++i) acc_[i] = a_[i] * a_[i];
-    blur(acc_.data(), s_aa_.data());
-    for (std::size_t i = 0; i < n; ++i) acc_[i] = a_[i] * bp[i];
-    blur(acc_.data(), s_ab_.data());
+    // (Per-pixel passes in parallel: each value is computed alone, so the split changes no bit.)
+    const auto pixels = static_cast<std::ptrdiff_t>(n);
+    T* pa = a_.data();
+    T* acc = acc_.data();
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t i = 0; i < pixels; ++i) {
+      pa[i] = a[i * channels + c];
+      acc[i] = pa[i] * pa[i];
+    }
+    blur(acc, s_aa_.data());
+#pragma omp parallel for schedule(static)
+    for (std::ptrdiff_t i = 0; i < pixels; ++i) acc[i] = pa[i] * bp[i];
+    blur(acc, s_ab_.data());
     blur(a_.data(), mu_a_.data());
 
     // SSIM map and the local derivatives (one vectorisable pass per row: the double row sum in pixel
@@ -222,8 +230,12 @@ T Ssim<T>::evaluate(const T* a, const Reference& ref, T* grad_a, T grad_scale) {
       blur(d_mu_.data(), mu_a_.data());
       blur(d_saa_.data(), s_aa_.data());
       blur(d_sab_.data(), s_ab_.data());
-      for (std::size_t i = 0; i < n; ++i)
-        grad_a[i * channels + c] += ssim_input_gradient(mu_a_[i], a_[i], s_aa_[i], bp[i], s_ab_[i]);
+      const T* g_mu = mu_a_.data();
+      const T* g_saa = s_aa_.data();
+      const T* g_sab = s_ab_.data();
+#pragma omp parallel for schedule(static)
+      for (std::ptrdiff_t i = 0; i < pixels; ++i)
+        grad_a[i * channels + c] += ssim_input_gradient(g_mu[i], pa[i], g_saa[i], bp[i], g_sab[i]);
     }
   }
   return static_cast<T>(total * inv_count);

@@ -344,6 +344,7 @@ IterationRecord Trainer::step() {
     s.grad_rgb.assign(values, 0.0f);
     float* pred = s.pred.data();
     const float* rgb = out.rgb.data();
+#pragma omp parallel for schedule(static)
     for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(values); ++i) pred[i] = std::clamp(rgb[i], 0.0f, 1.0f);
     rec.l1 = l1_loss(s.pred.data(), gt.pixels.data(), values, s.grad_rgb.data(), 1.0f);
   }
@@ -374,6 +375,7 @@ IterationRecord Trainer::step() {
     const profile::Scope p("loss: clamp's gradient");
     float* grad = s.grad_rgb.data();
     const float* rgb = out.rgb.data();
+#pragma omp parallel for schedule(static)
     for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(values); ++i)
       if (rgb[i] < 0.0f || rgb[i] > 1.0f) grad[i] = 0.0f;  // clamp: no gradient outside [0, 1]
   }
