@@ -82,10 +82,14 @@ void ssim_map_row(const T* __restrict mu_a, const T* __restrict mu_b, const T* _
                   const T* __restrict s_bb, const T* __restrict s_ab, int width, T C1, T C2, T g, T* __restrict map,
                   T* __restrict d_mu, T* __restrict d_saa, T* __restrict d_sab) {
   for (int x = 0; x < width; ++x) {
-    if constexpr (Grad)
-      map[x] = ssim_pixel<T, true>(mu_a[x], mu_b[x], s_aa[x], s_bb[x], s_ab[x], C1, C2, g, &d_mu[x], &d_saa[x],
-                                   &d_sab[x]);
-    else
+    if constexpr (Grad) {
+      // Into locals, then stored: with the array elements' addresses passed in, GCC left this loop scalar.
+      T dm, dsa, dsb;
+      map[x] = ssim_pixel<T, true>(mu_a[x], mu_b[x], s_aa[x], s_bb[x], s_ab[x], C1, C2, g, &dm, &dsa, &dsb);
+      d_mu[x] = dm;
+      d_saa[x] = dsa;
+      d_sab[x] = dsb;
+    } else
       map[x] = ssim_pixel<T, false>(mu_a[x], mu_b[x], s_aa[x], s_bb[x], s_ab[x], C1, C2, g, nullptr, nullptr, nullptr);
   }
 }
