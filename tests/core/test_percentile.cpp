@@ -1,5 +1,8 @@
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <limits>
+#include <random>
 #include <vector>
 
 #include "d2gs/core/error.hpp"
@@ -26,6 +29,52 @@ TEST(Percentile, ClampsQAndRefusesAnEmptySet) {
   EXPECT_EQ(percentile({3, 1, 2}, -5), 1.0);
   EXPECT_EQ(percentile({3, 1, 2}, 250), 3.0);
   EXPECT_THROW(percentile(std::vector<float>{}, 50), Error);
+}
+
+}  // namespace
+}  // namespace d2gs
+
+namespace d2gs {
+namespace {
+
+// kth_smallest against std::nth_element: random values with many repeats, both signs, both zeros,
+// infinities, denormals and a narrow range (one top-level bucket), every rank of small sets.
+TEST(KthSmallest, EqualsNthElement) {
+  std::mt19937 gen(7);
+  const auto check = [](const std::vector<float>& v) {
+    for (std::size_t k = 0; k < v.size(); k += std::max<std::size_t>(1, v.size() / 97)) {
+      std::vector<float> w = v;
+      std::nth_element(w.begin(), w.begin() + static_cast<std::ptrdiff_t>(k), w.end());
+      const float got = kth_smallest(v.data(), v.size(), k);
+      ASSERT_TRUE(got == w[k]) << "k " << k << " of " << v.size() << ": " << got << " vs " << w[k];
+    }
+  };
+  std::uniform_real_distribution<float> wide(-1e6f, 1e6f), narrow(3.0f, 3.001f);
+  std::uniform_int_distribution<int> repeat(0, 20);
+  for (int trial = 0; trial < 20; ++trial) {
+    std::vector<float> v;
+    const int n = 1 + trial * 397;
+    for (int i = 0; i < n; ++i) v.push_back(trial % 3 == 0 ? narrow(gen) : trial % 3 == 1 ? wide(gen) : float(repeat(gen)));
+    if (trial % 4 == 0) {
+      v.push_back(0.0f);
+      v.push_back(-0.0f);
+      v.push_back(std::numeric_limits<float>::infinity());
+      v.push_back(-std::numeric_limits<float>::infinity());
+      v.push_back(std::numeric_limits<float>::denorm_min());
+      v.push_back(-std::numeric_limits<float>::denorm_min());
+    }
+    check(v);
+  }
+  const std::vector<float> one = {2.5f};
+  EXPECT_EQ(kth_smallest(one.data(), 1, 0), 2.5f);
+}
+
+TEST(KthSmallest, RejectsARankOutsideTheValuesAndANaNResult) {
+  const std::vector<float> v = {1.0f, 2.0f};
+  EXPECT_THROW(kth_smallest(v.data(), v.size(), 2), Error);
+  EXPECT_THROW(kth_smallest(v.data(), 0, 0), Error);
+  const std::vector<float> nan = {std::numeric_limits<float>::quiet_NaN()};
+  EXPECT_THROW(kth_smallest(nan.data(), 1, 0), Error);
 }
 
 }  // namespace

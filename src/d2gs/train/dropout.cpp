@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "d2gs/core/error.hpp"
+#include "d2gs/core/percentile.hpp"
 #include "d2gs/geometry/knn.hpp"
 #include "d2gs/train/dd_drop_math.hpp"
 #include "d2gs/train/dropout_math.hpp"
@@ -70,16 +71,12 @@ std::vector<std::uint8_t> depth_layers(const std::vector<float>& depths) {
   const std::size_t n = depths.size();
   std::vector<std::uint8_t> layer(n, 0);
   if (n == 0) return layer;
-  // The ranks ⌊0.33·N⌋ and ⌊0.67·N⌋ of the sorted depths, by selection (every iteration: a full sort of
-  // ~40k depths cost ~2.5 ms); after the first selection everything from k1 on is ≥ it, so k2 ≥ k1 is there.
+  // The ranks ⌊0.33·N⌋ and ⌊0.67·N⌋ of the sorted depths, by radix selection (every iteration: a full sort
+  // of ~40k depths cost ~2.5 ms, two std::nth_element ~1 ms at 60k; the selection gives the same values).
   const auto k1 = static_cast<std::size_t>(tertile_rank(static_cast<long long>(n), kNearTertile));
   const auto k2 = static_cast<std::size_t>(tertile_rank(static_cast<long long>(n), kFarTertile));
-  std::vector<float> work = depths;
-  std::nth_element(work.begin(), work.begin() + static_cast<std::ptrdiff_t>(k1), work.end());
-  const float t1 = work[k1];
-  std::nth_element(work.begin() + static_cast<std::ptrdiff_t>(k1), work.begin() + static_cast<std::ptrdiff_t>(k2),
-                   work.end());
-  const float t2 = work[k2];
+  const float t1 = kth_smallest(depths.data(), n, k1);
+  const float t2 = kth_smallest(depths.data(), n, k2);
   for (std::size_t i = 0; i < n; ++i) layer[i] = static_cast<std::uint8_t>(depth_layer(depths[i], t1, t2));
   return layer;
 }
