@@ -7,7 +7,7 @@
 //    to order as the floats do (float_sort_key), with the Gaussian's index as the value.
 //  - the host sorts the keys (CUB's radix sort over 32 bits on the GPU, a stable sort of the same keys in
 //    emulation): the minimum and maximum depth and the tertile thresholds are the sorted keys at ranks 0,
-//    N − 1, ⌊0.33·N⌋ and ⌊0.67·N⌋ — the values std::minmax_element and std::nth_element give the CPU.
+//    N − 1, ⌊0.33·N⌋ and ⌊0.67·N⌋ — the values std::minmax_element and kth_smallest (core/percentile) give the CPU.
 //  - DdDropProbabilityKernel: one thread per Gaussian: the normalised depth, the layer, and p_i with the
 //    density score (host-refreshed kNN scores, uploaded) and the iteration's constants (DdDropTerms).
 //
