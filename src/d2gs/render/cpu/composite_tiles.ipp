@@ -222,7 +222,9 @@ void forward_tile(const Binning<T>& bin, int tile, const T bg[3], T* rgb, T* alp
     }
 }
 
-template <typename T, bool Smooth>
+// Depth: whether the loss has a depth gradient (d_depth). Without one (every method but the stereo-depth
+// regulariser) the depth channel's terms are left out: its gradient is zero, so they added only zeros.
+template <typename T, bool Smooth, bool Depth>
 void backward_tile(const Binning<T>& bin, int tile, const T bg[3], bool clamp_pass_through, const PixelState<T>& state,
                    const T* d_rgb, const T* d_alpha, const T* d_depth, T* isect_grads) {
   using V = typename Row<T>::V;
@@ -320,8 +322,8 @@ void backward_tile(const Binning<T>& bin, int tile, const T bg[3], bool clamp_pa
         // channel's loads die at once (fewer spills): d out / d alpha's sum over the channels,
         // sum_c (colour_c - behind_c) grad_c, the colour gradient w grad_c, and the colour behind this
         // Gaussian updated to include it.
-        V d_behind;
-        {
+        V d_behind{};
+        if constexpr (Depth) {
           const V g = gd[k], a = ad[k];
           d_behind = (sz - a) * g;
           v_z = fmadd(wk, g, v_z);
@@ -400,10 +402,14 @@ template <typename T>
 void backward_entry(const Binning<T>& bin, int tile, const T background[3], bool smooth_cutoff,
                     bool clamp_pass_through, const PixelState<T>& state, const T* d_rgb, const T* d_alpha,
                     const T* d_depth, T* isect_grads) {
+  const auto run = [&]<bool Smooth, bool Depth>() {
+    backward_tile<T, Smooth, Depth>(bin, tile, background, clamp_pass_through, state, d_rgb, d_alpha, d_depth,
+                                    isect_grads);
+  };
   if (smooth_cutoff)
-    backward_tile<T, true>(bin, tile, background, clamp_pass_through, state, d_rgb, d_alpha, d_depth, isect_grads);
+    d_depth ? run.template operator()<true, true>() : run.template operator()<true, false>();
   else
-    backward_tile<T, false>(bin, tile, background, clamp_pass_through, state, d_rgb, d_alpha, d_depth, isect_grads);
+    d_depth ? run.template operator()<false, true>() : run.template operator()<false, false>();
 }
 
 #define D2GS_TILE_STR2(x) #x
