@@ -1,8 +1,8 @@
 #include "d2gs/core/percentile.hpp"
 
 #include <algorithm>
-#include <cmath>
 #include <array>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <cstring>

@@ -359,18 +359,19 @@ IterationRecord Trainer::step() {
   rec.loss = rec.l1 + cfg.lambda_dssim * (1.0 - rec.ssim);
   // Depth and alpha reach the loss terms, and their gradients the backward, only for a method that uses them.
   const bool depth_terms = s.method->uses_depth();
-  std::optional<profile::Scope> profile_terms(std::in_place, "loss: method's terms");
-  if (depth_terms) {
-    s.grad_depth.assign(out.depth.size(), 0.0f);
-    s.grad_alpha.assign(out.alpha.size(), 0.0f);
+  {
+    const profile::Scope p("loss: method's terms");
+    if (depth_terms) {
+      s.grad_depth.assign(out.depth.size(), 0.0f);
+      s.grad_alpha.assign(out.alpha.size(), 0.0f);
+    }
+    rec.terms = s.method->loss_terms(MethodLoss{method_step, s.pred.data(), gt, out.width, out.height, 3, s.grad_rgb.data(),
+                                                depth_terms ? out.depth.data() : nullptr,
+                                                depth_terms ? out.alpha.data() : nullptr,
+                                                depth_terms ? s.grad_depth.data() : nullptr,
+                                                depth_terms ? s.grad_alpha.data() : nullptr});
+    for (const LossTerm& term : rec.terms) rec.loss += term.weight * term.value;
   }
-  rec.terms = s.method->loss_terms(MethodLoss{method_step, s.pred.data(), gt, out.width, out.height, 3, s.grad_rgb.data(),
-                                              depth_terms ? out.depth.data() : nullptr,
-                                              depth_terms ? out.alpha.data() : nullptr,
-                                              depth_terms ? s.grad_depth.data() : nullptr,
-                                              depth_terms ? s.grad_alpha.data() : nullptr});
-  for (const LossTerm& term : rec.terms) rec.loss += term.weight * term.value;
-  profile_terms.reset();
   {
     const profile::Scope p("loss: clamp's gradient");
     float* grad = s.grad_rgb.data();
