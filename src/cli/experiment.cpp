@@ -3,6 +3,7 @@
 // the report from the experiment folder.
 #include <cstdio>
 #include <filesystem>
+#include <map>
 #include <memory>
 #include <string>
 
@@ -11,6 +12,7 @@
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/log.hpp"
 #include "d2gs/experiment/collect.hpp"
+#include "d2gs/experiment/run_state.hpp"
 #include "d2gs/experiment/runner.hpp"
 #include "d2gs/experiment/slurm.hpp"
 
@@ -73,12 +75,19 @@ int run_experiment_command(const ExperimentOptions& o) {
     return 0;
   }
   if (o.list) {
+    std::map<experiment::RunPhase, int> count;
     std::printf("%-5s %-48s %s\n", "index", "run", "status");
-    for (const auto& r : runs)
-      std::printf("%-5d %-48s %s\n", r.index, r.dir.string().c_str(),
-                  experiment::run_finished(out, r) ? "finished"
-                  : fs::exists(out / "logs" / (r.id() + ".log")) ? "started (failed, interrupted or running)"
-                                                                  : "pending");
+    for (const auto& r : runs) {
+      const experiment::RunState state = experiment::inspect_run(out, r);
+      ++count[state.phase];
+      std::printf("%-5d %-48s %s\n", r.index, r.dir.string().c_str(), experiment::describe(state).c_str());
+    }
+    std::string summary;
+    for (const auto phase : {experiment::RunPhase::Finished, experiment::RunPhase::Running,
+                             experiment::RunPhase::Interrupted, experiment::RunPhase::Failed,
+                             experiment::RunPhase::Pending})
+      summary += fmt::format("{}{} {}", summary.empty() ? "" : ", ", count[phase], experiment::to_string(phase));
+    std::printf("%zu runs: %s\n", runs.size(), summary.c_str());
     return 0;
   }
 
@@ -134,7 +143,10 @@ Run add_experiment_command(CLI::App& app) {
       ->check(CLI::Range(1, 256))->capture_default_str();
   cmd->add_option("--run-index", o->run_index, "Train only run I (a Slurm array task), without collecting")
       ->check(CLI::NonNegativeNumber);
-  cmd->add_flag("--list", o->list, "Print the run list and each run's status, run nothing");
+  cmd->add_flag("--list", o->list,
+                "Print the run list and where each run stands (finished with its scores, running with its "
+                "iteration and time left, interrupted with the checkpoint it resumes from, failed with its "
+                "error, pending), run nothing");
   cmd->add_flag("--collect", o->collect, "Only build the tables and the report from the folder");
   cmd->add_flag("--no-imr", o->no_imr, "Skip the IMR computation when collecting");
   cmd->add_flag("--emit-slurm", o->emit_slurm, "Write DIR/slurm/{runs,collect}.sbatch (a job array), run nothing");

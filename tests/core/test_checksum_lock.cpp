@@ -70,6 +70,8 @@ TEST(FileLock, OneHolderAtATimeReleasedWhenTheHolderEnds) {
   EXPECT_EQ(lock_file_holder(path), static_cast<long>(child));
   EXPECT_TRUE(process_alive(child));
   ::kill(child, SIGKILL);
+  // Ended but not yet reaped (a zombie, which still answers kill(pid, 0)): not alive.
+  EXPECT_TRUE(test::wait_until([&] { return !process_alive(child); }, std::chrono::seconds(10)));
   int status = 0;
   ::waitpid(child, &status, 0);
   EXPECT_FALSE(process_alive(child));

@@ -219,6 +219,13 @@ TEST(ExperimentRuns, KilledExperimentResumes) {
   std::this_thread::sleep_for(std::chrono::milliseconds(300));
   ASSERT_FALSE(fs::exists(run / "results.json")) << "the run finished before it could be killed";
   int code = -1;
+  const auto list = test::run_cli("experiment -o '" + (dir / "exp").string() + "' --list");
+  EXPECT_EQ(list.exit_code, 0) << list.output;
+  EXPECT_NE(list.output.find("runs/fern/3v/3dgs/seed0"), std::string::npos) << list.output;
+  EXPECT_NE(list.output.find("interrupted at iteration "), std::string::npos) << list.output;
+  EXPECT_NE(list.output.find("/12; resumes from chkpnt"), std::string::npos) << list.output;
+  EXPECT_NE(list.output.find("1 runs: 0 finished, 0 running, 1 interrupted, 0 failed, 0 pending"), std::string::npos)
+      << list.output;
   const std::string out = experiment(config, dir / "exp", "--no-imr", &code);
   ASSERT_EQ(code, 0) << out;
   EXPECT_NE(out.find("resuming from chkpnt"), std::string::npos) << out;
@@ -244,6 +251,19 @@ TEST(ExperimentRuns, FailingRunIsReportedAndTheOthersFinish) {
   const std::string md = read_file(dir / "exp/tables/results.md");
   EXPECT_NE(md.find("| d2gs-broken | — | — | — | — | — | — | — | 0/1 |"), std::string::npos) << md;
   EXPECT_NE(read_file(dir / "exp/report.html").find("failed or interrupted"), std::string::npos);
+  // --list: the finished run with its scores, the failed one with its error line.
+  const auto list = test::run_cli("experiment -o '" + (dir / "exp").string() + "' --list");
+  EXPECT_EQ(list.exit_code, 0) << list.output;
+  const double psnr = psnr_of(dir / "exp/runs/fern/3v/3dgs/seed0");
+  EXPECT_NE(list.output.find(fmt::format("runs/fern/3v/3dgs/seed0                          finished: PSNR {:.3f}", psnr)),
+            std::string::npos)
+      << list.output;
+  EXPECT_NE(list.output.find("runs/fern/3v/d2gs-broken/seed0                   failed before its first logged "
+                             "iteration: d2gs: error: "),
+            std::string::npos)
+      << list.output;
+  EXPECT_NE(list.output.find("2 runs: 1 finished, 0 running, 0 interrupted, 1 failed, 0 pending"), std::string::npos)
+      << list.output;
 }
 
 }  // namespace

@@ -56,7 +56,16 @@ long lock_file_holder(const fs::path& path) {
 
 bool process_alive(long pid) {
   if (pid <= 0) return false;
-  return ::kill(static_cast<pid_t>(pid), 0) == 0 || errno == EPERM;
+  if (::kill(static_cast<pid_t>(pid), 0) != 0 && errno != EPERM) return false;
+  // A process that has ended but is not yet reaped by its parent (a zombie) still answers kill(pid, 0);
+  // /proc/PID/stat's state after the parenthesised command name says so ('Z', or 'X' while it goes).
+  std::ifstream stat("/proc/" + std::to_string(pid) + "/stat");
+  std::string text;
+  if (!std::getline(stat, text)) return true;  // no /proc: trust kill()
+  const std::size_t close = text.rfind(')');
+  if (close == std::string::npos || close + 2 >= text.size()) return true;
+  const char state = text[close + 2];
+  return state != 'Z' && state != 'X';
 }
 
 }  // namespace d2gs

@@ -31,7 +31,8 @@ private:
 // The process id its holder wrote into the lock file at `path`, 0 when there is none.
 long lock_file_holder(const std::filesystem::path& path);
 
-// True when a process with this id runs on this machine.
+// True when a process with this id runs on this machine (an ended process its parent has not reaped yet,
+// a zombie, does not).
 bool process_alive(long pid);
 
 }  // namespace d2gs

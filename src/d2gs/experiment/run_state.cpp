@@ -1,0 +1,141 @@
+#include "d2gs/experiment/run_state.hpp"
+
+#include <fstream>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "d2gs/core/atomic_file.hpp"
+#include "d2gs/core/file_lock.hpp"
+#include "d2gs/train/checkpoint.hpp"
+#include "d2gs/train/progress.hpp"
+
+namespace d2gs::experiment {
+namespace fs = std::filesystem;
+
+namespace {
+
+// The last non-empty line of a log, lines ending at '\n' or at the progress line's '\r'.
+std::string last_log_line(const fs::path& log) {
+  const std::string text = read_file(log);
+  std::size_t end = text.size();
+  while (end > 0) {
+    const std::size_t begin = text.find_last_of("\r\n", end - 1);
+    const std::size_t from = begin == std::string::npos ? 0 : begin + 1;
+    if (from < end) return text.substr(from, end - from);
+    if (begin == std::string::npos) break;
+    end = begin;
+  }
+  return {};
+}
+
+// The last iteration line of train_log.jsonl (lines with "elapsed_s"; events and a line still being
+// written are passed over).
+void read_train_log(const fs::path& path, RunState& s) {
+  std::ifstream in(path);
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.find("\"elapsed_s\"") == std::string::npos) continue;
+    const auto j = nlohmann::json::parse(line, nullptr, false);
+    if (j.is_discarded() || !j.is_object() || !j.contains("iteration") || !j["iteration"].is_number_integer() ||
+        !j["elapsed_s"].is_number())
+      continue;
+    s.iteration = j["iteration"].get<int>();
+    s.elapsed_s = j["elapsed_s"].get<double>();
+  }
+}
+
+void read_results(const fs::path& path, RunState& s) {
+  std::ifstream in(path);
+  const auto j = nlohmann::json::parse(in, nullptr, false);
+  const auto number = [&](const nlohmann::json& o, const char* key, double& out) {
+    if (!o.is_object() || !o.contains(key) || !o[key].is_number()) return false;
+    out = o[key].get<double>();
+    return true;
+  };
+  double gaussians = 0;
+  if (j.is_discarded() || !j.is_object() || !j.contains("mean") || !number(j["mean"], "PSNR", s.psnr) ||
+      !number(j["mean"], "SSIM", s.ssim)) {
+    s.message = "results.json has no mean PSNR and SSIM";
+    return;
+  }
+  number(j, "train_seconds", s.train_seconds);
+  if (number(j, "gaussians", gaussians)) s.gaussians = static_cast<long>(gaussians);
+}
+
+}  // namespace
+
+const char* to_string(RunPhase p) {
+  switch (p) {
+    case RunPhase::Pending: return "pending";
+    case RunPhase::Running: return "running";
+    case RunPhase::Interrupted: return "interrupted";
+    case RunPhase::Failed: return "failed";
+    case RunPhase::Finished: return "finished";
+  }
+  return "?";
+}
+
+RunState inspect_run(const fs::path& out_dir, const RunSpec& run) {
+  RunState s;
+  const fs::path dir = out_dir / run.dir;
+  const fs::path log = out_dir / "logs" / (run.id() + ".log");
+  if (run.train_config.is_object() && run.train_config.contains("iterations") &&
+      run.train_config["iterations"].is_number_integer())
+    s.iterations = run.train_config["iterations"].get<int>();
+  std::error_code ec;
+  if (fs::is_regular_file(dir / "results.json", ec)) {
+    s.phase = RunPhase::Finished;
+    read_results(dir / "results.json", s);
+    return s;
+  }
+  if (!fs::exists(log, ec)) return s;  // pending
+  read_train_log(dir / "train_log.jsonl", s);
+  if (fs::is_directory(dir, ec)) {
+    const auto checkpoints = checkpoints_in(dir);
+    if (!checkpoints.empty()) s.checkpoint = checkpoints.front().first;
+  }
+  const long holder = lock_file_holder(out_dir / "logs" / (run.id() + ".lock"));
+  if (process_alive(holder)) {
+    s.phase = RunPhase::Running;
+    s.pid = holder;
+    return s;
+  }
+  const std::string last = last_log_line(log);
+  if (last.rfind("d2gs: error:", 0) == 0) {
+    s.phase = RunPhase::Failed;
+    s.message = last;
+  } else {
+    s.phase = RunPhase::Interrupted;
+  }
+  return s;
+}
+
+std::string describe(const RunState& s) {
+  const std::string at = s.iteration > 0 ? fmt::format("at iteration {}/{}", s.iteration, s.iterations)
+                                          : std::string("before its first logged iteration");
+  const std::string resume = s.checkpoint > 0 ? fmt::format("resumes from chkpnt{}.bin", s.checkpoint)
+                                              : std::string("restarts from scratch (no checkpoint)");
+  switch (s.phase) {
+    case RunPhase::Pending: return "pending";
+    case RunPhase::Finished:
+      if (!s.message.empty()) return "finished (" + s.message + ")";
+      return fmt::format("finished: PSNR {:.3f}, SSIM {:.4f}, {} Gaussians, {:.0f} s", s.psnr, s.ssim, s.gaussians,
+                         s.train_seconds);
+    case RunPhase::Running: {
+      std::string line = fmt::format("running (pid {}): iteration {}/{}", s.pid, s.iteration, s.iterations);
+      if (s.iteration > 0) {
+        line += " after " + format_duration(s.elapsed_s);
+        if (s.iterations > s.iteration)
+          line += ", about " + format_duration(s.elapsed_s / s.iteration * (s.iterations - s.iteration)) +
+                  " left at the mean pace so far";
+      }
+      return line;
+    }
+    case RunPhase::Interrupted: return fmt::format("interrupted {}; {}", at, resume);
+    case RunPhase::Failed: return fmt::format("failed {}: {}", at, s.message);
+  }
+  return "?";
+}
+
+}  // namespace d2gs::experiment
