@@ -186,6 +186,42 @@ void run_cases(const DensifyFn& fn, const PruneFn& prune_fn, const std::string& 
   compare_prune(none, 0.005f, prune_fn, what + " prune n 0");
 }
 
+// reset_opacity against the kernel on copies of c (and of c with infinite and NaN logits): every
+// parameter and moment bit for bit (the cap is computed on the host, the rest is a comparison and zeros,
+// so the GPU too must agree exactly); some logits must have been capped and some left as they were.
+using ResetFn = std::function<void(Gaussians&, AdamState&, float)>;
+
+void compare_reset(const ResetFn& kernel_fn, const std::string& what) {
+  for (std::size_t n : {std::size_t{0}, std::size_t{1}, std::size_t{257}, std::size_t{5000}}) {
+    Case c = random_case(n, 3, 91 + n, false);
+    if (n >= 257) {
+      c.model.opacity_logits[3] = INFINITY;
+      c.model.opacity_logits[4] = -INFINITY;
+      c.model.opacity_logits[5] = NAN;
+    }
+    for (float ceiling : {0.01f, 0.5f}) {
+      const std::string at = what + " n " + std::to_string(n) + " ceiling " + std::to_string(ceiling);
+      Case cpu = c, kernel = c;
+      reset_opacity(cpu.model, cpu.adam, ceiling);
+      kernel_fn(kernel.model, kernel.adam, ceiling);
+      expect_gaussians_equal(kernel.model, cpu.model, at + " model");
+      expect_gaussians_equal(kernel.adam.exp_avg, cpu.adam.exp_avg, at + " exp_avg");
+      expect_gaussians_equal(kernel.adam.exp_avg_sq, cpu.adam.exp_avg_sq, at + " exp_avg_sq");
+      if (n < 257) continue;
+      std::size_t capped = 0, kept = 0;
+      for (std::size_t i = 0; i < n; ++i) {
+        capped += kernel.model.opacity_logits[i] != c.model.opacity_logits[i];
+        kept += kernel.model.opacity_logits[i] == c.model.opacity_logits[i];
+      }
+      EXPECT_GT(capped, n / 10) << at;
+      EXPECT_GT(kept, n / 10) << at;
+      EXPECT_TRUE(std::isnan(kernel.model.opacity_logits[5])) << at;
+      EXPECT_EQ(kernel.model.opacity_logits[4], -INFINITY) << at;
+      for (std::size_t i = 0; i < n; ++i) EXPECT_EQ(kernel.adam.exp_avg.opacity_logits[i], 0.0f) << at;
+    }
+  }
+}
+
 // Fern's SfM points as the means of a random model (scene extent from its cameras, as the trainer).
 Case fern_case(float& extent) {
   SceneLoadOptions load;
@@ -225,6 +261,12 @@ TEST(EmulatedDensify, FernSizedEqualsTheCpuBitForBit) {
   }
 }
 
+TEST(EmulatedDensify, OpacityResetEqualsTheCpuBitForBit) {
+  for (auto s : emulate::kAllSchedules)
+    compare_reset([s](Gaussians& m, AdamState& a, float ceiling) { tk::emulated_reset_opacity(m, a, ceiling, s); },
+                  "schedule " + std::to_string(static_cast<int>(s)));
+}
+
 // On the GPU: the same rows, sources, counts and stream words; values within float rounding.
 constexpr float kDeviceTolerance = 1e-6f;
 
@@ -237,6 +279,15 @@ TEST(DeviceDensify, EqualsTheCpuWithinRounding) {
   g_tolerance = kDeviceTolerance;
   run_cases(device(), device_prune(), "device");
   g_tolerance = 0.0f;
+}
+
+TEST(DeviceDensify, OpacityResetEqualsTheCpuBitForBit) {
+  if (cuda::device_count() == 0) {
+    Case c = random_case(10, 0, 1, false);
+    EXPECT_THROW(tk::device_reset_opacity(c.model, c.adam), Error);
+    GTEST_SKIP() << cuda::describe_device();
+  }
+  compare_reset([](Gaussians& m, AdamState& a, float ceiling) { tk::device_reset_opacity(m, a, ceiling); }, "device");
 }
 
 TEST(DeviceDensify, FernSizedEqualsTheCpuWithinRounding) {

@@ -142,7 +142,7 @@ DensifyReport prune_by_opacity(Gaussians& model, AdamState& adam, GradientStats&
 
 void reset_opacity(Gaussians& model, AdamState& adam, float ceiling) {
   const float cap = inverse_sigmoid(ceiling);
-  for (auto& o : model.opacity_logits) o = std::min(o, cap);
+  for (auto& o : model.opacity_logits) o = reset_opacity_logit(o, cap);
   std::fill(adam.exp_avg.opacity_logits.begin(), adam.exp_avg.opacity_logits.end(), 0.0f);
   std::fill(adam.exp_avg_sq.opacity_logits.begin(), adam.exp_avg_sq.opacity_logits.end(), 0.0f);
 }

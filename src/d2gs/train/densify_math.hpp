@@ -1,6 +1,7 @@
 #pragma once
 // The per-Gaussian arithmetic of adaptive density control (train/densify.cpp): the densification
-// statistic (GradientStats::add), the clone/split/prune decisions and the split children, shared
+// statistic (GradientStats::add), the clone/split/prune decisions, the split children and the opacity
+// reset, shared
 // unchanged by the CPU and the CUDA backend's kernels (train/kernels/densify_kernels.hpp).
 // C++17, no standard library: nvcc compiles it.
 #include <math.h>
@@ -64,6 +65,10 @@ D2GS_HD void split_child(const float* mean, const float* log_scale, const float*
   for (int r = 0; r < 3; ++r) child_mean[r] = mean[r] + (R[r * 3] * s[0] + R[r * 3 + 1] * s[1] + R[r * 3 + 2] * s[2]);
   for (int d = 0; d < 3; ++d) child_log_scale[d] = log_scale[d] - shrink;
 }
+
+// The opacity reset of one Gaussian: its logit capped at `cap` (std::min(logit, cap): the logit unless cap
+// is smaller).
+D2GS_HD float reset_opacity_logit(float logit, float cap) { return cap < logit ? cap : logit; }
 
 // One try of Rng::normal's polar method on the uniforms (u01, v01): whether it is accepted and, if so,
 // its two normals (u·f first, v·f kept as the spare).

@@ -98,4 +98,10 @@ DensifyReport device_prune_by_opacity(Gaussians& model, AdamState& adam, Gradien
   return DensifyPipeline<cuda::DeviceBackend>(backend).prune_by_opacity(model, adam, stats, min_opacity);
 }
 
+void device_reset_opacity(Gaussians& model, AdamState& adam, float ceiling) {
+  if (cuda::device_count() == 0) fail("CUDA: {}", cuda::describe_device());
+  cuda::DeviceBackend backend;
+  DensifyPipeline<cuda::DeviceBackend>(backend).reset_opacity(model, adam, ceiling);
+}
+
 }  // namespace d2gs::train_kernels

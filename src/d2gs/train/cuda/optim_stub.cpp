@@ -49,5 +49,6 @@ DensifyReport device_densify_and_prune(Gaussians&, AdamState&, GradientStats&, f
 DensifyReport device_prune_by_opacity(Gaussians&, AdamState&, GradientStats&, float) {
   fail("CUDA: {}", cuda::describe_device());
 }
+void device_reset_opacity(Gaussians&, AdamState&, float) { fail("CUDA: {}", cuda::describe_device()); }
 
 }  // namespace d2gs::train_kernels

@@ -18,6 +18,7 @@
 //    its v·f (Rng's spare, held when the count of pair-drawn normals is odd).
 //  * DensifyScatterKernel: one thread per Gaussian writes its kept row, its clone, its children (model
 //    rows; the moments copied for kept rows, zero for new ones) and each row's source index.
+//  * OpacityResetKernel: reset_opacity, one thread per Gaussian: the logit capped, its Adam moments zeroed.
 #include <stdint.h>
 
 #include "d2gs/render/kernels/block.hpp"
@@ -189,5 +190,21 @@ D2GS_HD void densify_scatter_thread(int i, const DensifyScatterArgs& a) {
   }
 }
 using DensifyScatterKernel = render::kernels::PerItemKernel<DensifyScatterArgs, densify_scatter_thread>;
+
+struct OpacityResetArgs {
+  int n = 0;
+  float cap = 0.0f;             // inverse_sigmoid(ceiling), computed on the host as reset_opacity does
+  float* logits = nullptr;      // n
+  float* exp_avg = nullptr;     // n: the opacity's Adam moments
+  float* exp_avg_sq = nullptr;  // n
+};
+
+D2GS_HD void opacity_reset_thread(int i, const OpacityResetArgs& a) {
+  a.logits[i] = reset_opacity_logit(a.logits[i], a.cap);
+  a.exp_avg[i] = 0.0f;
+  a.exp_avg_sq[i] = 0.0f;
+}
+
+using OpacityResetKernel = render::kernels::PerItemKernel<OpacityResetArgs, opacity_reset_thread>;
 
 }  // namespace d2gs::train_kernels

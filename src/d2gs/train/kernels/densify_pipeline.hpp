@@ -1,5 +1,5 @@
 #pragma once
-// The host side of the densification edits (densify_and_prune, prune_by_opacity of train/densify.hpp)
+// The host side of the densification edits (densify_and_prune, prune_by_opacity, reset_opacity of train/densify.hpp)
 // over a backend of render/kernels/pipeline.hpp, written once: the flags kernel, one scan of the flags,
 // the split's normals from the CPU's Rng stream (counted, scanned, drawn), the scatter into new arrays.
 // Host arrays in and out; the host reads back only scalars (the totals of the scan, whether enough
@@ -34,6 +34,29 @@ public:
 
   DensifyReport prune_by_opacity(Gaussians& model, AdamState& adam, GradientStats& stats, float min_opacity) {
     return run(model, adam, stats, false, 0.0f, 0.0f, min_opacity, 1, nullptr);
+  }
+
+  // reset_opacity: every logit capped at inverse_sigmoid(ceiling), the opacity's moments zeroed.
+  void reset_opacity(Gaussians& model, AdamState& adam, float ceiling) {
+    const std::size_t n = model.opacity_logits.size();
+    if (adam.exp_avg.opacity_logits.size() != n || adam.exp_avg_sq.opacity_logits.size() != n)
+      fail("opacity reset: {} opacities, {} and {} moments", n, adam.exp_avg.opacity_logits.size(),
+           adam.exp_avg_sq.opacity_logits.size());
+    if (n == 0) return;
+    Array<float> logits, m, v;
+    backend_.upload(logits, model.opacity_logits.data(), n);
+    backend_.upload(m, adam.exp_avg.opacity_logits.data(), n);
+    backend_.upload(v, adam.exp_avg_sq.opacity_logits.data(), n);
+    OpacityResetArgs a;
+    a.n = static_cast<int>(n);
+    a.cap = inverse_sigmoid(ceiling);
+    a.logits = logits.data();
+    a.exp_avg = m.data();
+    a.exp_avg_sq = v.data();
+    launch<OpacityResetKernel>(static_cast<long long>(n), a);
+    backend_.download(model.opacity_logits, logits, n);
+    backend_.download(adam.exp_avg.opacity_logits, m, n);
+    backend_.download(adam.exp_avg_sq.opacity_logits, v, n);
   }
 
 private:

@@ -91,4 +91,10 @@ DensifyReport emulated_prune_by_opacity(Gaussians& model, AdamState& adam, Gradi
   return DensifyPipeline(backend).prune_by_opacity(model, adam, stats, min_opacity);
 }
 
+void emulated_reset_opacity(Gaussians& model, AdamState& adam, float ceiling,
+                            render::kernels::emulate::Schedule schedule) {
+  render::kernels::emulate::HostBackend backend{schedule};
+  DensifyPipeline(backend).reset_opacity(model, adam, ceiling);
+}
+
 }  // namespace d2gs::train_kernels

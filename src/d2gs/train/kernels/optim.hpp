@@ -5,7 +5,8 @@
 // (dropout_kernels.hpp), the densification statistic and edits (densify_kernels.hpp): through the CPU emulator
 // (render/kernels/emulate.hpp) in every build, and on the GPU (train/cuda/optim.cu) when there is one.
 // Same arguments and results as Adam::step, l1_loss, Ssim<float>, dafe_loss, dd_drop_probabilities,
-// dropgaussian_mask, bernoulli_mask, GradientStats::add, densify_and_prune and prune_by_opacity; host arrays in and out.
+// dropgaussian_mask, bernoulli_mask, GradientStats::add, densify_and_prune, prune_by_opacity and reset_opacity;
+// host arrays in and out.
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -71,6 +72,9 @@ DensifyReport emulated_densify_and_prune(
 DensifyReport emulated_prune_by_opacity(
     Gaussians& model, AdamState& adam, GradientStats& stats, float min_opacity,
     render::kernels::emulate::Schedule schedule = render::kernels::emulate::Schedule::Forward);
+// reset_opacity: the same logits and moments as the CPU's.
+void emulated_reset_opacity(Gaussians& model, AdamState& adam, float ceiling = 0.01f,
+                            render::kernels::emulate::Schedule schedule = render::kernels::emulate::Schedule::Forward);
 
 // The same on the GPU; d2gs::Error without one.
 void device_adam_step(Gaussians& model, const Gaussians& grads, AdamState& state, const LearningRates& lr,
@@ -96,5 +100,6 @@ double device_dafe_loss(const float* a, const float* b, int width, int height, i
 DensifyReport device_densify_and_prune(Gaussians& model, AdamState& adam, GradientStats& stats, float scene_extent,
                                        const DensifyOptions& options, Rng& rng);
 DensifyReport device_prune_by_opacity(Gaussians& model, AdamState& adam, GradientStats& stats, float min_opacity);
+void device_reset_opacity(Gaussians& model, AdamState& adam, float ceiling = 0.01f);
 
 }  // namespace d2gs::train_kernels
