@@ -11,6 +11,13 @@ namespace d2gs::experiment {
 namespace {
 namespace fs = std::filesystem;
 
+// An experiment folder for expand_runs (which checks that it could be written) in this test's scratch
+// folder, not a fixed /tmp path another program may hold as a file.
+fs::path out_dir(const char* name) {
+  static const fs::path base = test::scratch_dir();
+  return base / name;
+}
+
 const RunSpec& find(const std::vector<RunSpec>& runs, const std::string& label, std::uint64_t seed) {
   for (const auto& r : runs)
     if (r.label == label && r.seed == seed) return r;
@@ -20,7 +27,7 @@ const RunSpec& find(const std::vector<RunSpec>& runs, const std::string& label, 
 TEST(ExperimentConfig, FernExampleIsThreeMethodsTimesThreeSeeds) {
   const auto file = test::source_dir() / "configs/experiments/llff_fern_3views.json";
   const ExperimentConfig c = load_experiment_config(file, test::shared_data().string());
-  const auto runs = expand_runs(c, "/tmp/exp");
+  const auto runs = expand_runs(c, out_dir("exp"));
   ASSERT_EQ(runs.size(), 9u);
   EXPECT_EQ(runs[0].dir, fs::path("runs/fern/3v/3dgs/seed0"));
   EXPECT_EQ(runs[4].dir, fs::path("runs/fern/3v/dropgaussian/seed1"));
@@ -32,7 +39,7 @@ TEST(ExperimentConfig, FernExampleIsThreeMethodsTimesThreeSeeds) {
     EXPECT_EQ(t["resolution"], 8);
     EXPECT_EQ(t["iterations"], 10000);
     EXPECT_EQ(t["n_views"], 3);
-    EXPECT_EQ(t["model_path"], (fs::path("/tmp/exp") / runs[k].dir).string());
+    EXPECT_EQ(t["model_path"], (out_dir("exp") / runs[k].dir).string());
     EXPECT_EQ(t["source"], (test::shared_data() / "nerf_llff_data/fern").lexically_normal().string());
     EXPECT_EQ(t["checkpoint_iterations"].size(), 10u);  // every 1000, the last included
     EXPECT_EQ(t["checkpoint_iterations"].back(), 10000);
@@ -52,19 +59,19 @@ TEST(ExperimentConfig, FernExampleIsThreeMethodsTimesThreeSeeds) {
 TEST(ExperimentConfig, RelativeInitCloudIsUnderTheDataRoot) {
   const auto file = test::source_dir() / "configs/experiments/llff_fern_fidelity.json";
   const ExperimentConfig c = load_experiment_config(file, test::shared_data().string());
-  const auto runs = expand_runs(c, "/tmp/fid");
+  const auto runs = expand_runs(c, out_dir("fid"));
   ASSERT_EQ(runs.size(), 24u);
   const auto cloud = (test::shared_data() / "published_init/fern/3_views_fused.ply").lexically_normal();
   for (const auto& r : runs) EXPECT_EQ(r.train_config["init"], fs::absolute(cloud).string()) << r.id();
   const auto mvs = expand_runs(
       load_experiment_config(test::source_dir() / "configs/experiments/llff_fern_mvs.json", test::shared_data().string()),
-      "/tmp/mvs");
+      out_dir("mvs"));
   EXPECT_EQ(find(mvs, "dropgaussian-pm-init", 0).train_config["init"], "dense");
   EXPECT_EQ(find(mvs, "dropgaussian-pm-init", 0).train_config["init_dense_method"], "patchmatch");
   EXPECT_EQ(find(mvs, "d2gs-published-init", 2).train_config["init"], fs::absolute(cloud).string());
   // Under another data root the same file names a cloud that is not there: one line naming the file.
   try {
-    (void)expand_runs(load_experiment_config(file, "/nonexistent-root"), "/tmp/fid");
+    (void)expand_runs(load_experiment_config(file, "/nonexistent-root"), out_dir("fid"));
     FAIL() << "expected an error";
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("llff_fern_fidelity.json"), std::string::npos) << e.what();
@@ -76,7 +83,7 @@ TEST(ExperimentConfig, RelativeInitCloudIsUnderTheDataRoot) {
 TEST(ExperimentConfig, AblationExampleMirrorsThePaperTable) {
   const auto file = test::source_dir() / "configs/experiments/llff_fern_ablation.json";
   const ExperimentConfig c = load_experiment_config(file, test::shared_data().string());
-  const auto runs = expand_runs(c, "/tmp/abl");
+  const auto runs = expand_runs(c, out_dir("abl"));
   ASSERT_EQ(runs.size(), 18u);
   const auto& no_depth = find(runs, "d2gs-density-layers", 0).train_config;
   EXPECT_EQ(no_depth["dd_use_depth_score"], false);
@@ -164,7 +171,7 @@ TEST(ExperimentConfig, InvalidRunConfigurationNamesTheRun) {
                             {"methods", {{{"method", "d2gs"}, {"scene_preset", true}}}}};
   const ExperimentConfig c = parse_experiment_config(j, "exp.json");
   try {
-    expand_runs(c, "/tmp/x");
+    expand_runs(c, out_dir("x"));
     FAIL() << "expected an error";
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("exp.json: run 0 (fern__3v__d2gs__seed0): "), std::string::npos) << e.what();
@@ -185,7 +192,7 @@ TEST(ExperimentConfig, EveryShippedConfigLoadsAndExpands) {
     ++files;
     const ExperimentConfig c = load_experiment_config(e.path(), test::shared_data().string());
     EXPECT_EQ(c.name, e.path().stem().string()) << e.path();
-    const auto runs = expand_runs(c, "/tmp/x");
+    const auto runs = expand_runs(c, out_dir("x"));
     EXPECT_EQ(runs.size(), c.scenes.size() * c.views.size() * c.methods.size() * c.seeds.size()) << e.path();
     for (const auto& r : runs) EXPECT_EQ(r.train_config["iterations"], 10000) << e.path();
   }
