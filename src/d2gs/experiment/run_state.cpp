@@ -7,6 +7,7 @@
 
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/file_lock.hpp"
+#include "d2gs/report/run_data.hpp"
 #include "d2gs/train/checkpoint.hpp"
 #include "d2gs/train/progress.hpp"
 
@@ -30,7 +31,7 @@ std::string last_log_line(const fs::path& log) {
 }
 
 // The last iteration line of train_log.jsonl (lines with "elapsed_s"; events and a line still being
-// written are passed over).
+// written are passed over: report::read_train_log would refuse the whole file for that last line).
 void read_train_log(const fs::path& path, RunState& s) {
   std::ifstream in(path);
   std::string line;
@@ -47,20 +48,16 @@ void read_train_log(const fs::path& path, RunState& s) {
 
 void read_results(const fs::path& path, RunState& s) {
   std::ifstream in(path);
-  const auto j = nlohmann::json::parse(in, nullptr, false);
-  const auto number = [&](const nlohmann::json& o, const char* key, double& out) {
-    if (!o.is_object() || !o.contains(key) || !o[key].is_number()) return false;
-    out = o[key].get<double>();
-    return true;
-  };
-  double gaussians = 0;
-  if (j.is_discarded() || !j.is_object() || !j.contains("mean") || !number(j["mean"], "PSNR", s.psnr) ||
-      !number(j["mean"], "SSIM", s.ssim)) {
+  const auto j = nlohmann::json::parse(in, nullptr, false);  // discarded (not an object) when unreadable
+  const report::Metrics mean = report::mean_metrics(j);
+  if (!mean.count("PSNR") || !mean.count("SSIM")) {
     s.message = "results.json has no mean PSNR and SSIM";
     return;
   }
-  number(j, "train_seconds", s.train_seconds);
-  if (number(j, "gaussians", gaussians)) s.gaussians = static_cast<long>(gaussians);
+  s.psnr = mean.at("PSNR");
+  s.ssim = mean.at("SSIM");
+  if (j.contains("train_seconds") && j["train_seconds"].is_number()) s.train_seconds = j["train_seconds"].get<double>();
+  if (j.contains("gaussians") && j["gaussians"].is_number()) s.gaussians = j["gaussians"].get<long>();
 }
 
 }  // namespace

@@ -1,8 +1,7 @@
 #pragma once
 // The per-Gaussian arithmetic of adaptive density control (train/densify.cpp): the densification
 // statistic (GradientStats::add), the clone/split/prune decisions, the split children and the opacity
-// reset, shared
-// unchanged by the CPU and the CUDA backend's kernels (train/kernels/densify_kernels.hpp).
+// reset, shared unchanged by the CPU and the CUDA backend's kernels (train/kernels/densify_kernels.hpp).
 // C++17, no standard library: nvcc compiles it.
 #include <math.h>
 
