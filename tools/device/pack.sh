@@ -2,7 +2,7 @@
 # Packs what the GPU checks need into .devpack/ (ignored by git) for the `device` tool of this workplace.
 # The GPU machine has nvcc and the CUDA runtime but none of our Debian libraries, and the tool carries at
 # most 64 MiB. The pack holds:
-# - the stripped test and benchmark programs built here (build/, for sm_90);
+# - the stripped test and benchmark programs and d2gs built here (build/, for sm_90), as one xz archive;
 # - the shared libraries they load, except glibc's, libstdc++, libgcc_s, libz and the CUDA runtime,
 #   as one xz archive (about 50 MB);
 # - the part of fern that the GPU tests read.
@@ -10,10 +10,13 @@
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 grep -qx '/.devpack/' .git/info/exclude 2>/dev/null || echo '/.devpack/' >> .git/info/exclude
-programs=(build/tests/cuda/test_cuda build/bench/bench_cuda)
+programs=(build/tests/cuda/test_cuda build/bench/bench_cuda build/bench/bench_render build/bench/bench_train build/d2gs)
 for p in "${programs[@]}"; do [ -x "$p" ] || { echo "pack: $p is missing: build first (scripts/build.sh)" >&2; exit 1; }; done
-rm -rf .devpack && mkdir -p .devpack/bin .devpack/shared/data/nerf_llff_data/fern .devpack/shared/data/published_init
-cp "${programs[@]}" .devpack/bin/ && strip .devpack/bin/*
+rm -rf .devpack && mkdir -p .devpack/shared/data/nerf_llff_data/fern .devpack/shared/data/published_init
+bins=$(mktemp -d)
+mkdir "$bins/bin" && cp "${programs[@]}" "$bins/bin/" && strip "$bins"/bin/*
+tar cf - -C "$bins" bin | xz -9e -T2 > .devpack/devbin.tar.xz  # about 2.4 MB instead of 13 MB
+rm -rf "$bins"
 fern=../shared/data/nerf_llff_data/fern
 cp -r "$fern/images_8" "$fern/sparse" "$fern/poses_bounds.npy" .devpack/shared/data/nerf_llff_data/fern/
 cp -r ../shared/data/published_init/fern .devpack/shared/data/published_init/

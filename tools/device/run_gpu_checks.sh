@@ -3,7 +3,7 @@
 # the CUDA rasterizer benchmark, and compute-sanitizer racecheck and memcheck on a few of the tests.
 set -u
 R=$PWD; P=$R/.devpack
-tar xJf $P/devlib.tar.xz -C /tmp && export LD_LIBRARY_PATH=/tmp/devlib:/usr/local/cuda/lib64:/usr/local/cuda/targets/x86_64-linux/lib
+tar xJf $P/devlib.tar.xz -C /tmp && tar xJf $P/devbin.tar.xz -C $P && export LD_LIBRARY_PATH=/tmp/devlib:/usr/local/cuda/lib64:/usr/local/cuda/targets/x86_64-linux/lib
 echo "repo at $R"
 mkdir -p /work 2>/dev/null
 [ -e /work/main ] || ln -s "$R" /work/main
