@@ -2,6 +2,7 @@
 // is a one-line error before any work, `auto` takes the CPU and says why, and runs record what they used.
 #include <gtest/gtest.h>
 
+#include <sstream>
 #include <string>
 
 #include <fmt/format.h>
@@ -76,12 +77,14 @@ TEST(DeviceChoice, CudaTrainingIsTheRasterizerOnTheGpu) {
 }
 
 TEST(DeviceChoice, RequestsParseAndPrint) {
-  for (const char* w : {"cpu", "cuda", "auto"}) EXPECT_STREQ(render::to_string(render::parse_device_request(w)), w);
+  for (const char* w : {"cpu", "cuda", "auto", "emulated"})
+    EXPECT_STREQ(render::to_string(render::parse_device_request(w)), w);
+  EXPECT_STREQ(render::to_string(render::Device::Emulated), "emulated");
   try {
     render::parse_device_request("gpu");
     ADD_FAILURE() << "'gpu' was taken";
   } catch (const Error& e) {
-    EXPECT_NE(std::string(e.what()).find("--device must be cpu, cuda or auto (got 'gpu')"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("--device must be cpu, cuda, auto or emulated (got 'gpu')"), std::string::npos) << e.what();
   }
 }
 
@@ -127,6 +130,45 @@ TEST(DeviceCli, TrainRenderEvalTakeTheFlag) {
   EXPECT_EQ(render_cuda.exit_code, 1) << render_cuda.output;
   EXPECT_NE(render_cuda.output.find("--device cuda: "), std::string::npos) << render_cuda.output;
   EXPECT_FALSE(fs::exists(dir / "renders"));
+}
+
+// --device emulated: the CUDA backend's kernels through the emulator, on any machine. A training run's
+// losses follow the CPU's (the rasterizers agree to float rounding: EmulatedRasterizer.*), the run records
+// the device, and `eval` scores its model with the emulated kernels as the CPU does.
+TEST(DeviceCli, EmulatedKernelsTrainAndEvaluateLikeTheCpu) {
+  const render::DeviceChoice c = render::choose_device(render::DeviceRequest::Emulated, render::DeviceWork::Train);
+  EXPECT_EQ(c.device, render::Device::Emulated);
+  EXPECT_NE(c.description.find("emulated on the CPU"), std::string::npos) << c.description;
+  const auto dir = test::scratch_dir();
+  nlohmann::json logs[2];
+  for (int k = 0; k < 2; ++k) {
+    const char* device = k == 0 ? "cpu" : "emulated";
+    const fs::path run = dir / device;
+    const auto r = test::run_cli(fmt::format("-q train -s '{}' -m '{}' -r 8 --n-views 3 --init random --random-points 400 "
+                                             "--iterations 3 --log-every 1 --seed 5 --device {}",
+                                             fern(), run.string(), device));
+    ASSERT_EQ(r.exit_code, 0) << r.output;
+    EXPECT_EQ(nlohmann::json::parse(read_file(run / "config.json"))["device_used"], device);
+    EXPECT_EQ(nlohmann::json::parse(read_file(run / "results.json"))["device"], device);
+    logs[k] = nlohmann::json::array();
+    std::istringstream lines(read_file(run / "train_log.jsonl"));
+    for (std::string line; std::getline(lines, line);)
+      if (auto j = nlohmann::json::parse(line); j.contains("loss")) logs[k].push_back(j);
+  }
+  ASSERT_EQ(logs[0].size(), 3u);
+  ASSERT_EQ(logs[1].size(), logs[0].size());
+  for (std::size_t i = 0; i < logs[0].size(); ++i) {
+    const double a = logs[0][i]["loss"], b = logs[1][i]["loss"];
+    EXPECT_GT(a, 0.0);
+    EXPECT_NEAR(b, a, 1e-5 * a) << "iteration " << i + 1;
+  }
+  const auto cpu = test::run_cli(fmt::format("-q eval -m '{}' --device cpu --json", (dir / "cpu").string()));
+  const auto emulated = test::run_cli(fmt::format("-q eval -m '{}' --device emulated --json", (dir / "cpu").string()));
+  ASSERT_EQ(cpu.exit_code, 0) << cpu.output;
+  ASSERT_EQ(emulated.exit_code, 0) << emulated.output;
+  const auto je = nlohmann::json::parse(emulated.output), jc = nlohmann::json::parse(cpu.output);
+  EXPECT_EQ(je["device"], "emulated");
+  EXPECT_NEAR(je["mean"]["PSNR"].get<double>(), jc["mean"]["PSNR"].get<double>(), 1e-3);
 }
 
 // d2gs info without a scene: the backend --device auto would use, as a table and as JSON.

@@ -19,7 +19,8 @@ DeviceRequest parse_device_request(std::string_view word) {
   if (word == "cpu") return DeviceRequest::Cpu;
   if (word == "cuda") return DeviceRequest::Cuda;
   if (word == "auto") return DeviceRequest::Auto;
-  fail("option --device must be cpu, cuda or auto (got '{}')", word);
+  if (word == "emulated") return DeviceRequest::Emulated;
+  fail("option --device must be cpu, cuda, auto or emulated (got '{}')", word);
 }
 
 const char* to_string(DeviceRequest request) {
@@ -27,11 +28,19 @@ const char* to_string(DeviceRequest request) {
     case DeviceRequest::Cpu: return "cpu";
     case DeviceRequest::Cuda: return "cuda";
     case DeviceRequest::Auto: return "auto";
+    case DeviceRequest::Emulated: return "emulated";
   }
   return "?";
 }
 
-const char* to_string(Device device) { return device == Device::Cuda ? "cuda" : "cpu"; }
+const char* to_string(Device device) {
+  switch (device) {
+    case Device::Cpu: return "cpu";
+    case Device::Cuda: return "cuda";
+    case Device::Emulated: return "emulated";
+  }
+  return "?";
+}
 
 const char* to_string(DeviceWork work) { return work == DeviceWork::Render ? "rendering" : "a training step"; }
 
@@ -53,6 +62,13 @@ std::string describe_cpu_backend() {
 DeviceChoice choose_device(DeviceRequest request, DeviceWork work) {
   DeviceChoice cpu_choice{Device::Cpu, describe_cpu_backend(), ""};
   if (request == DeviceRequest::Cpu) return cpu_choice;
+  if (request == DeviceRequest::Emulated)
+    return {Device::Emulated,
+            work == DeviceWork::Render
+                ? "the CUDA backend's kernels emulated on the CPU (slow: for checking the kernels)"
+                : "the CUDA backend's kernels emulated on the CPU for the rasterizer; the losses, Adam and "
+                  "densification on the CPU backend (slow: for checking the kernels)",
+            ""};
   // Why CUDA cannot be used, or empty when it can.
   std::string why;
   if (cuda::device_count() == 0)
@@ -72,7 +88,11 @@ DeviceChoice choose_device(DeviceRequest request, DeviceWork work) {
 }
 
 std::unique_ptr<Rasterizer> make_rasterizer(const DeviceChoice& choice) {
-  if (choice.device == Device::Cpu) return make_cpu_rasterizer();
+  switch (choice.device) {
+    case Device::Cpu: return make_cpu_rasterizer();
+    case Device::Emulated: return kernels::make_kernel_rasterizer(kernels::make_emulated_stages(), true);
+    case Device::Cuda: break;
+  }
   return kernels::make_kernel_rasterizer(cuda::make_device_stages(), true);
 }
 

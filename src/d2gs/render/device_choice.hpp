@@ -14,10 +14,14 @@ namespace d2gs::render {
 
 class Rasterizer;
 
-enum class DeviceRequest { Cpu, Cuda, Auto };
-enum class Device { Cpu, Cuda };
+// Emulated: the CUDA backend's kernels run on the CPU by the emulator (render/kernels/emulate.hpp) in place
+// of the GPU, through the same host code (kernels/kernel_rasterizer.hpp): the GPU's logic without a GPU, for
+// checking the kernels over whole commands (a training run's scores against the CPU's). Far slower than
+// either backend (every thread of every block in turn); never chosen by `auto`.
+enum class DeviceRequest { Cpu, Cuda, Auto, Emulated };
+enum class Device { Cpu, Cuda, Emulated };
 
-// "cpu", "cuda", "auto"; anything else is a d2gs::Error naming the option.
+// "cpu", "cuda", "auto", "emulated"; anything else is a d2gs::Error naming the option.
 DeviceRequest parse_device_request(std::string_view word);
 const char* to_string(DeviceRequest request);
 const char* to_string(Device device);
@@ -45,7 +49,7 @@ bool cuda_backend_runs(DeviceWork work);
 // where the backend runs `work` wholly; else the CPU, with `reason`.
 DeviceChoice choose_device(DeviceRequest request, DeviceWork work);
 
-// The rasterizer of `choice`: the CPU reference, or the CUDA backend's kernels on device 0
+// The rasterizer of `choice`: the CPU reference, or the CUDA backend's kernels on device 0 or in the emulator
 // (render/kernels/kernel_rasterizer.hpp).
 std::unique_ptr<Rasterizer> make_rasterizer(const DeviceChoice& choice);
 

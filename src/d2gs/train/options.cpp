@@ -342,12 +342,14 @@ std::vector<TrainOption> declare() {
   t.push_back(choice({"device", method,
                       "Backend: 'cpu' (the reference), 'cuda' (an error where no CUDA device or no complete CUDA "
                       "backend exists), 'auto' (CUDA when both exist, else the CPU, saying why; `d2gs info` shows the "
-                      "choice)",
+                      "choice), 'emulated' (the CUDA kernels run on the CPU by the emulator instead of a GPU: slow, for "
+                      "checking them)",
                       Output},
                      [](auto& c) -> auto& { return c.device; },
                      {{"cpu", render::DeviceRequest::Cpu},
                       {"cuda", render::DeviceRequest::Cuda},
-                      {"auto", render::DeviceRequest::Auto}}));
+                      {"auto", render::DeviceRequest::Auto},
+                      {"emulated", render::DeviceRequest::Emulated}}));
   // ---- initial points ----
   t.push_back(text({"init", init,
                     "Initial points: 'dense' (stereo depth of the training views fused, as `d2gs init`; reuses "

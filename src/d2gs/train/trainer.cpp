@@ -278,7 +278,7 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
     write_point_cloud_ply(s.out() / "input.ply", init);
   }
   if (!s.device.reason.empty()) spdlog::info("--device auto: using the {}: {}", s.device.description, s.device.reason);
-  if (s.device.device == render::Device::Cuda) spdlog::info("device: {}", s.device.description);
+  if (s.device.device != render::Device::Cpu) spdlog::info("device: {}", s.device.description);
   write_run_config(s.out(), s.cfg, s.scene, s.split, s.extent, s.oracle_init, s.device.device);
   write_cameras_json(s.out(), s.scene, s.split);
   s.log.open(s.out() / "train_log.jsonl", s.iteration > 0 ? std::ios::app : std::ios::trunc);
