@@ -107,6 +107,9 @@ Run add_init_command(CLI::App& app) {
                   "PatchMatch: largest forward-backward reprojection error (pixels) of a source that confirms a "
                   "depth (COLMAP's filter_geom_consistency_max_cost)")
       ->capture_default_str();
+  cmd->add_option("--pm-filter-min-ncc", pm.filter_min_ncc,
+                  "PatchMatch: smallest NCC of a source that confirms a depth (COLMAP's filter_min_ncc)")
+      ->capture_default_str();
   cmd->add_option("--fusion-min-pixels", o->geometry.patch_match_fusion.min_pixels,
                   "PatchMatch fusion: pixels (across views) a fused point needs")
       ->capture_default_str();
