@@ -1,11 +1,13 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
 #include <random>
 #include <vector>
 
 #include "d2gs/core/error.hpp"
+#include "d2gs/core/float_order.hpp"
 #include "d2gs/core/percentile.hpp"
 
 namespace d2gs {
@@ -75,6 +77,27 @@ TEST(KthSmallest, RejectsARankOutsideTheValuesAndANaNResult) {
   EXPECT_THROW(kth_smallest(v.data(), 0, 0), Error);
   const std::vector<float> nan = {std::numeric_limits<float>::quiet_NaN()};
   EXPECT_THROW(kth_smallest(nan.data(), 1, 0), Error);
+}
+
+// The key of a float orders as the floats do (negatives below positives, -0 just below +0, the
+// infinities at the ends) and gives the float back bit for bit.
+TEST(FloatOrderKey, OrdersAsTheFloatsAndRoundTrips) {
+  const float inf = std::numeric_limits<float>::infinity();
+  std::vector<float> v = {-inf, -3.3e38f, -2.0f, -1.0f, -1e-30f, -1e-45f, -0.0f, 0.0f, 1e-45f, 1e-30f, 0.5f, 1.0f,
+                          3.3e38f, inf};
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> u(-1e6f, 1e6f);
+  for (int i = 0; i < 1000; ++i) v.push_back(u(rng));
+  for (std::size_t i = 0; i < v.size(); ++i) {
+    const float back = float_from_order_key(float_order_key(v[i]));
+    EXPECT_EQ(std::signbit(back), std::signbit(v[i]));
+    EXPECT_EQ(back, v[i]);
+    for (std::size_t j = 0; j < v.size(); ++j) {
+      if (!(v[i] < v[j])) continue;
+      EXPECT_LT(float_order_key(v[i]), float_order_key(v[j])) << v[i] << " " << v[j];
+    }
+  }
+  EXPECT_LT(float_order_key(-0.0f), float_order_key(0.0f));
 }
 
 }  // namespace

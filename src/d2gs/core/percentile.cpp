@@ -8,6 +8,7 @@
 #include <cstring>
 
 #include "d2gs/core/error.hpp"
+#include "d2gs/core/float_order.hpp"
 
 namespace d2gs {
 
@@ -27,20 +28,6 @@ template double percentile<double>(std::vector<double> values, double q);
 
 namespace {
 
-// Float bits as an unsigned key in the floats' order: negatives reversed below the positives.
-std::uint32_t order_key(float f) {
-  std::uint32_t b;
-  std::memcpy(&b, &f, sizeof b);
-  return (b & 0x80000000u) ? ~b : (b | 0x80000000u);
-}
-
-float from_order_key(std::uint32_t key) {
-  const std::uint32_t b = (key & 0x80000000u) ? (key & 0x7fffffffu) : ~key;
-  float f;
-  std::memcpy(&f, &b, sizeof f);
-  return f;
-}
-
 // Of `count` keys (from get(i)) with the bits above `shift + bits` equal, the bucket of bits
 // [shift, shift + bits) that holds rank k; k becomes the rank within that bucket.
 template <class Get>
@@ -59,16 +46,16 @@ std::uint32_t bucket_of_rank(std::size_t count, Get&& get, int shift, int bits, 
 float kth_smallest(const float* values, std::size_t n, std::size_t k) {
   if (k >= n) fail("k-th smallest: rank {} of {} values", k, n);
   // Bits 31..21, then 20..10 of the keys whose top bits match, then 9..0 of those.
-  const std::uint32_t top = bucket_of_rank(n, [&](std::size_t i) { return order_key(values[i]); }, 21, 11, k);
+  const std::uint32_t top = bucket_of_rank(n, [&](std::size_t i) { return float_order_key(values[i]); }, 21, 11, k);
   std::vector<std::uint32_t> keys;
   for (std::size_t i = 0; i < n; ++i)
-    if (const std::uint32_t key = order_key(values[i]); (key >> 21) == top) keys.push_back(key);
+    if (const std::uint32_t key = float_order_key(values[i]); (key >> 21) == top) keys.push_back(key);
   const std::uint32_t mid = bucket_of_rank(keys.size(), [&](std::size_t i) { return keys[i]; }, 10, 11, k);
   std::size_t kept = 0;
   for (const std::uint32_t key : keys)
     if (((key >> 10) & 0x7ffu) == mid) keys[kept++] = key;
   const std::uint32_t low = bucket_of_rank(kept, [&](std::size_t i) { return keys[i]; }, 0, 10, k);
-  const float v = from_order_key((top << 21) | (mid << 10) | low);
+  const float v = float_from_order_key((top << 21) | (mid << 10) | low);
   if (std::isnan(v)) fail("k-th smallest: a NaN among the values");
   return v;
 }

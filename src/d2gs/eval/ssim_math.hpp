@@ -7,7 +7,7 @@
 //   S = (2·mu_a·mu_b + C1)(2·cov + C2) / ((mu_a² + mu_b² + C1)(var_a + var_b + C2)),
 // and its local derivatives (scaled by g) are blurred once more and combined into d(mean S)/da by
 // ssim_input_gradient (G is self-adjoint).
-#include "d2gs/render/host_device.hpp"
+#include "d2gs/core/host_device.hpp"
 
 namespace d2gs {
 

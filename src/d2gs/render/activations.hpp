@@ -3,7 +3,7 @@
 // Gaussian mixtures): opacity = sigmoid(logit), in float and in double.
 #include <cmath>
 
-#include "d2gs/render/host_device.hpp"
+#include "d2gs/core/host_device.hpp"
 
 namespace d2gs {
 

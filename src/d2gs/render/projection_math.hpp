@@ -16,7 +16,7 @@
 //    i.e. mean2d = (fx x/z + cx - 0.5, fy y/z + cy - 0.5) for d2gs's cx, cy (pixel centres at +0.5).
 #include <math.h>
 
-#include "d2gs/render/host_device.hpp"
+#include "d2gs/core/host_device.hpp"
 
 namespace d2gs::render {
 

@@ -6,7 +6,7 @@
 //   p_i = clamp(λ_layer(i) · S_i · r(t), 0, 1),  S_i = w_d·(1 − minmax(d_i)) + w_ρ·minmax(ρ_i)   (method.md §4)
 #include <math.h>
 
-#include "d2gs/render/host_device.hpp"
+#include "d2gs/core/host_device.hpp"
 
 namespace d2gs {
 

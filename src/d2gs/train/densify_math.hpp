@@ -6,7 +6,7 @@
 #include <math.h>
 
 #include "d2gs/render/activations.hpp"
-#include "d2gs/render/host_device.hpp"
+#include "d2gs/core/host_device.hpp"
 
 namespace d2gs {
 

@@ -2,7 +2,7 @@
 // The per-Gaussian decisions of the dropout masks (train/dropout.cpp), shared unchanged by the CPU and the
 // CUDA backend's kernels (train/kernels/dropout_kernels.hpp). `u` is the Gaussian's uniform draw in
 // [0, 1) (Rng::uniform). C++17, no standard library: nvcc compiles it.
-#include "d2gs/render/host_device.hpp"
+#include "d2gs/core/host_device.hpp"
 
 namespace d2gs {
 

@@ -4,7 +4,7 @@
 // C++17, no standard library: nvcc compiles it.
 #include <math.h>
 
-#include "d2gs/render/host_device.hpp"
+#include "d2gs/core/host_device.hpp"
 
 namespace d2gs {
 

@@ -36,7 +36,7 @@
 #include <stdint.h>
 #include <string.h>
 
-#include "d2gs/render/host_device.hpp"
+#include "d2gs/core/host_device.hpp"
 
 namespace d2gs::render::kernels {
 

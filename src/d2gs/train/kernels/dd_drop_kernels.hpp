@@ -4,7 +4,7 @@
 //
 //  - GaussianDepthKernel: one thread per Gaussian: its depth w.r.t. the training camera (Euclidean
 //    distance to the centre, or the release's x·R_w2c[:,2]), and a sort key of it: the float's bits made
-//    to order as the floats do (float_sort_key), with the Gaussian's index as the value.
+//    to order as the floats do (float_order_key, core/float_order.hpp), with the Gaussian's index as the value.
 //  - the host sorts the keys (CUB's radix sort over 32 bits on the GPU, a stable sort of the same keys in
 //    emulation): the minimum and maximum depth and the tertile thresholds are the sorted keys at ranks 0,
 //    N − 1, ⌊0.33·N⌋ and ⌊0.67·N⌋ — the values std::minmax_element and kth_smallest (core/percentile) give the CPU.
@@ -15,29 +15,12 @@
 // of either sign gives the same layers and the same (v − lo)/range, so the probabilities are the CPU's
 // bit for bit. Depths must not be NaN (neither the CPU's selection nor the key order defines them).
 #include <stdint.h>
-#include <string.h>
 
+#include "d2gs/core/float_order.hpp"
 #include "d2gs/render/kernels/block.hpp"
 #include "d2gs/train/dd_drop_math.hpp"
 
 namespace d2gs::train_kernels {
-
-// A float's bits as an unsigned key that orders as the floats do (negative ones reversed, below the
-// positive ones), and back.
-D2GS_HD uint32_t float_sort_key(float v) {
-  const uint32_t u = render::kernels::float_bits(v);
-  return (u & 0x80000000u) ? ~u : (u | 0x80000000u);
-}
-D2GS_HD float float_from_sort_key(uint32_t k) {
-  const uint32_t u = (k & 0x80000000u) ? (k & 0x7fffffffu) : ~k;
-#if defined(__CUDA_ARCH__)
-  return __uint_as_float(u);
-#else
-  float v;
-  memcpy(&v, &u, sizeof v);
-  return v;
-#endif
-}
 
 struct GaussianDepthArgs {
   int n = 0;
@@ -46,7 +29,7 @@ struct GaussianDepthArgs {
   double centre[3] = {0, 0, 0};  // the camera centre in world coordinates
   double axis[3] = {0, 0, 0};    // the third column of R_world_to_cam
   float* depth = nullptr;        // n
-  uint64_t* keys = nullptr;      // n: float_sort_key(depth)
+  uint64_t* keys = nullptr;      // n: float_order_key(depth)
   int32_t* index = nullptr;      // n: i
 };
 
@@ -55,7 +38,7 @@ D2GS_HD void gaussian_depth_thread(int i, const GaussianDepthArgs& a) {
   const float d = a.euclidean ? dd_drop_depth_euclidean(m[0], m[1], m[2], a.centre)
                               : dd_drop_depth_release(m[0], m[1], m[2], a.axis);
   a.depth[i] = d;
-  a.keys[i] = float_sort_key(d);
+  a.keys[i] = float_order_key(d);
   a.index[i] = i;
 }
 using GaussianDepthKernel = render::kernels::PerItemKernel<GaussianDepthArgs, gaussian_depth_thread>;
@@ -71,10 +54,10 @@ struct DdDropProbabilityArgs {
 };
 
 D2GS_HD void dd_drop_probability_thread(int i, const DdDropProbabilityArgs& a) {
-  const float lo = float_from_sort_key(static_cast<uint32_t>(a.sorted_keys[0]));
-  const float hi = float_from_sort_key(static_cast<uint32_t>(a.sorted_keys[a.n - 1]));
-  const float t1 = float_from_sort_key(static_cast<uint32_t>(a.sorted_keys[a.near_rank]));
-  const float t2 = float_from_sort_key(static_cast<uint32_t>(a.sorted_keys[a.far_rank]));
+  const float lo = float_from_order_key(static_cast<uint32_t>(a.sorted_keys[0]));
+  const float hi = float_from_order_key(static_cast<uint32_t>(a.sorted_keys[a.n - 1]));
+  const float t1 = float_from_order_key(static_cast<uint32_t>(a.sorted_keys[a.near_rank]));
+  const float t2 = float_from_order_key(static_cast<uint32_t>(a.sorted_keys[a.far_rank]));
   const float d = a.depth[i];
   a.probabilities[i] =
       dd_drop_probability(minmax_normalised(d, lo, hi - lo), a.density_score[i], depth_layer(d, t1, t2), a.terms);

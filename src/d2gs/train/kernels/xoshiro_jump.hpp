@@ -14,7 +14,7 @@
 #include <vector>
 
 #include "d2gs/core/random.hpp"
-#include "d2gs/render/host_device.hpp"
+#include "d2gs/core/host_device.hpp"
 
 namespace d2gs::train_kernels {
 
