@@ -6,6 +6,7 @@
 // CUDA's expf is not glibc's, and a cutoff or clamp can fall the other way for a few pixels).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <memory>
@@ -147,6 +148,56 @@ void compare(render::Rasterizer& kernels, bool exact_forward, double forward_abs
 TEST(EmulatedRasterizer, EqualsTheCpuRasterizer) {
   auto kernels = render::kernels::make_kernel_rasterizer(render::kernels::make_emulated_stages(), cpu_level_fuses());
   compare(*kernels, true, 0.0, 1e-5);
+}
+
+// Element by element, with the L1 loss's gradient shape (±1/N per value) and SH degree 0 (a run's first
+// 1 000 iterations) and 3: a gradient the CPU gives as exactly zero is zero here too, and no value of
+// some size changes sign. Adam scales each parameter's steps by its own gradient's history, so a tiny
+// non-zero where the CPU has zero would become a full-size step; relative L2 per array cannot see that.
+TEST(EmulatedRasterizer, GradientsVanishWhereTheCpusDoAndKeepTheirSigns) {
+  auto cpu = render::make_cpu_rasterizer();
+  auto kernels = render::kernels::make_kernel_rasterizer(render::kernels::make_emulated_stages(), cpu_level_fuses());
+  for (const Scene& scene : scenes()) {
+    for (const int degree : {0, 3}) {
+      Scene s = scene;
+      s.options.sh_degree = degree;
+      const float* mult = s.multiplier.empty() ? nullptr : s.multiplier.data();
+      const std::size_t values = cpu->forward(s.model, mult, s.camera, s.options).rgb.size();
+      kernels->forward(s.model, mult, s.camera, s.options);
+      std::mt19937 rng(11);
+      std::vector<float> d_rgb(values);
+      for (auto& v : d_rgb) v = ((rng() & 1) ? 1.0f : -1.0f) / static_cast<float>(values);
+      const render::RenderGradients want = cpu->backward(d_rgb.data(), nullptr, nullptr);
+      const render::RenderGradients got = kernels->backward(d_rgb.data(), nullptr, nullptr);
+      const std::pair<const char*, std::pair<const std::vector<float>*, const std::vector<float>*>> arrays[] = {
+          {"means", {&got.model.means, &want.model.means}},
+          {"log_scales", {&got.model.log_scales, &want.model.log_scales}},
+          {"quats", {&got.model.quats, &want.model.quats}},
+          {"opacity_logits", {&got.model.opacity_logits, &want.model.opacity_logits}},
+          {"sh_dc", {&got.model.sh_dc, &want.model.sh_dc}},
+          {"sh_rest", {&got.model.sh_rest, &want.model.sh_rest}},
+          {"grad_mean2d_ndc", {&got.grad_mean2d_ndc, &want.grad_mean2d_ndc}},
+      };
+      for (const auto& [name, pair] : arrays) {
+        const std::vector<float>& g = *pair.first;
+        const std::vector<float>& w = *pair.second;
+        ASSERT_EQ(g.size(), w.size()) << s.label << " " << name;
+        float largest = 0.0f;
+        for (const float v : w) largest = std::max(largest, std::fabs(v));
+        std::size_t zero_mismatches = 0, sign_flips = 0, zeros = 0;
+        for (std::size_t i = 0; i < w.size(); ++i) {
+          zeros += w[i] == 0.0f;
+          zero_mismatches += (w[i] == 0.0f) != (g[i] == 0.0f);
+          sign_flips += std::fabs(w[i]) > 1e-4f * largest && (w[i] > 0.0f) != (g[i] > 0.0f);
+        }
+        EXPECT_EQ(zero_mismatches, 0u) << s.label << ", SH " << degree << ", " << name << " (" << zeros << " zeros on the CPU)";
+        EXPECT_EQ(sign_flips, 0u) << s.label << ", SH " << degree << ", " << name;
+        if (degree == 0 && std::string(name) == "sh_rest") {
+          EXPECT_EQ(zeros, w.size()) << s.label;
+        }
+      }
+    }
+  }
 }
 
 TEST(EmulatedRasterizer, RefusesAMissingStageRunner) {
