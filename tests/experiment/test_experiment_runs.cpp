@@ -250,7 +250,11 @@ TEST(ExperimentRuns, FailingRunIsReportedAndTheOthersFinish) {
   EXPECT_TRUE(fs::is_regular_file(dir / "exp/runs/fern/3v/3dgs/seed0/results.json"));
   const std::string md = read_file(dir / "exp/tables/results.md");
   EXPECT_NE(md.find("| d2gs-broken | — | — | — | — | — | — | — | 0/1 |"), std::string::npos) << md;
-  EXPECT_NE(read_file(dir / "exp/report.html").find("failed or interrupted"), std::string::npos);
+  // The report's run table says what --list says: the failed run with its error line.
+  const std::string html = read_file(dir / "exp/report.html");
+  EXPECT_NE(html.find("failed before its first logged iteration: d2gs: error: "), std::string::npos) << html;
+  EXPECT_NE(html.find("(see logs/fern__3v__d2gs-broken__seed0.log)"), std::string::npos);
+  EXPECT_NE(html.find("finished: PSNR "), std::string::npos);
   // --list: the finished run with its scores, the failed one with its error line.
   const auto list = test::run_cli("experiment -o '" + (dir / "exp").string() + "' --list");
   EXPECT_EQ(list.exit_code, 0) << list.output;

@@ -91,6 +91,8 @@ TEST(RunState, RunningWhileALiveProcessHoldsTheLock) {
   // 2 500 iterations in 40 s: 7 500 more at that pace are 2 minutes.
   EXPECT_EQ(describe(s), "running (pid " + std::to_string(::getpid()) +
                              "): iteration 2500/10000 after 00:40, about 02:00 left at the mean pace so far");
+  // A holder known to have ended its runs (a runner's report) is not running: the run was interrupted.
+  EXPECT_EQ(inspect_run(f.out, f.run, static_cast<long>(::getpid())).phase, RunPhase::Interrupted);
 }
 
 TEST(RunState, FinishedRunGivesItsScoresOrWhyNot) {

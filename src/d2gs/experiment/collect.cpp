@@ -3,11 +3,14 @@
 #include <algorithm>
 #include <memory>
 
+#include <unistd.h>
+
 #include <fmt/format.h>
 
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
 #include "d2gs/eval/imr.hpp"
+#include "d2gs/experiment/run_state.hpp"
 #include "d2gs/model/ply.hpp"
 #include "d2gs/report/html.hpp"
 #include "d2gs/report/run_report.hpp"
@@ -177,26 +180,16 @@ std::string experiment_report_html(const ExperimentConfig& config, const std::ve
             "(LPIPS/AVGE appear when results.json has them). Also in tables/results.md and tables/results.csv.</p>\n";
   page.add_section("tables", "Results", tables);
 
-  // Run status.
+  // Run status: what `d2gs experiment --list` says (run_state.hpp).
   std::vector<std::vector<std::string>> status_rows;
   for (const auto& r : runs) {
-    const fs::path dir = out_dir / r.dir;
-    std::string status = "pending";
-    std::string psnr = "—";
-    if (fs::is_regular_file(dir / "results.json")) {
-      status = "finished";
-      try {
-        const auto j = nlohmann::json::parse(read_file(dir / "results.json"));
-        const auto m = report::mean_metrics(j);
-        if (m.count("PSNR")) psnr = fmt::format("{:.2f}", m.at("PSNR"));
-      } catch (const nlohmann::json::exception&) {
-        status = "finished (results.json unreadable)";
-      }
-    } else if (fs::exists(out_dir / "logs" / (r.id() + ".log"))) {
-      status = "failed or interrupted (see logs/" + r.id() + ".log)";
-    }
+    const RunState state = inspect_run(out_dir, r, static_cast<long>(::getpid()));  // our runs have ended
+    std::string status = describe(state);
+    if (state.phase == RunPhase::Failed || state.phase == RunPhase::Interrupted)
+      status += " (see logs/" + r.id() + ".log)";
+    const bool scored = state.phase == RunPhase::Finished && state.message.empty();
     status_rows.push_back({std::to_string(r.index), r.scene, std::to_string(r.views), r.label,
-                           std::to_string(r.seed), status, psnr});
+                           std::to_string(r.seed), status, scored ? fmt::format("{:.2f}", state.psnr) : "—"});
   }
   page.add_section("runs", "Runs",
                    report::html_table({"#", "scene", "views", "method", "seed", "status", "PSNR"}, status_rows, 6));

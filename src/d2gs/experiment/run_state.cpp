@@ -73,7 +73,7 @@ const char* to_string(RunPhase p) {
   return "?";
 }
 
-RunState inspect_run(const fs::path& out_dir, const RunSpec& run) {
+RunState inspect_run(const fs::path& out_dir, const RunSpec& run, long ended_holder) {
   RunState s;
   const fs::path dir = out_dir / run.dir;
   const fs::path log = out_dir / "logs" / (run.id() + ".log");
@@ -93,7 +93,7 @@ RunState inspect_run(const fs::path& out_dir, const RunSpec& run) {
     if (!checkpoints.empty()) s.checkpoint = checkpoints.front().first;
   }
   const long holder = lock_file_holder(out_dir / "logs" / (run.id() + ".lock"));
-  if (process_alive(holder)) {
+  if (holder != ended_holder && process_alive(holder)) {
     s.phase = RunPhase::Running;
     s.pid = holder;
     return s;

@@ -31,7 +31,9 @@ struct RunState {
   std::string message;  // failed: the log's error line; finished: why results.json could not be read
 };
 
-RunState inspect_run(const std::filesystem::path& out_dir, const RunSpec& run);
+// `ended_holder`: a process id known to hold no run any more, not taken as running (the runner's own, when
+// its report inspects the runs after they ended; 0: none).
+RunState inspect_run(const std::filesystem::path& out_dir, const RunSpec& run, long ended_holder = 0);
 
 // One line, e.g. "finished: PSNR 23.207, SSIM 0.7624, 69531 Gaussians, 2532 s" or "running (pid 812):
 // iteration 5000/10000 after 22:02, about 22:02 left at the mean pace so far".
