@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <memory>
@@ -84,6 +85,18 @@ std::vector<Scene> scenes() {
   return out;
 }
 
+// Every gradient array of `got` beside the same of `want`, by name.
+using ArrayPair = std::pair<const char*, std::pair<const std::vector<float>*, const std::vector<float>*>>;
+std::array<ArrayPair, 7> gradient_arrays(const render::RenderGradients& got, const render::RenderGradients& want) {
+  return {{{"means", {&got.model.means, &want.model.means}},
+           {"log_scales", {&got.model.log_scales, &want.model.log_scales}},
+           {"quats", {&got.model.quats, &want.model.quats}},
+           {"opacity_logits", {&got.model.opacity_logits, &want.model.opacity_logits}},
+           {"sh_dc", {&got.model.sh_dc, &want.model.sh_dc}},
+           {"sh_rest", {&got.model.sh_rest, &want.model.sh_rest}},
+           {"grad_mean2d_ndc", {&got.grad_mean2d_ndc, &want.grad_mean2d_ndc}}}};
+}
+
 // Forward and backward of every scene through the CPU rasterizer and `make` (one rasterizer reused across
 // scenes, as a command reuses it across views).
 void compare(render::Rasterizer& kernels, bool exact_forward, double forward_abs, double backward_rel_l2) {
@@ -125,15 +138,7 @@ void compare(render::Rasterizer& kernels, bool exact_forward, double forward_abs
     const render::RenderGradients gg = kernels.backward(d_rgb.data(), d_alpha.data(), d_depth.data());
     ASSERT_EQ(gg.model.size(), gw.model.size()) << s.label;
     ASSERT_EQ(gg.model.sh_degree, gw.model.sh_degree) << s.label;
-    const std::pair<const char*, std::pair<const std::vector<float>*, const std::vector<float>*>> arrays[] = {
-        {"means", {&gg.model.means, &gw.model.means}},
-        {"log_scales", {&gg.model.log_scales, &gw.model.log_scales}},
-        {"quats", {&gg.model.quats, &gw.model.quats}},
-        {"opacity_logits", {&gg.model.opacity_logits, &gw.model.opacity_logits}},
-        {"sh_dc", {&gg.model.sh_dc, &gw.model.sh_dc}},
-        {"sh_rest", {&gg.model.sh_rest, &gw.model.sh_rest}},
-        {"grad_mean2d_ndc", {&gg.grad_mean2d_ndc, &gw.grad_mean2d_ndc}},
-    };
+    const auto arrays = gradient_arrays(gg, gw);
     std::printf("%s [%s]: backward rel L2", s.label.c_str(), kernels.name());
     for (const auto& [name, pair] : arrays) {
       ASSERT_EQ(pair.first->size(), pair.second->size()) << s.label << " " << name;
@@ -169,15 +174,7 @@ TEST(EmulatedRasterizer, GradientsVanishWhereTheCpusDoAndKeepTheirSigns) {
       for (auto& v : d_rgb) v = ((rng() & 1) ? 1.0f : -1.0f) / static_cast<float>(values);
       const render::RenderGradients want = cpu->backward(d_rgb.data(), nullptr, nullptr);
       const render::RenderGradients got = kernels->backward(d_rgb.data(), nullptr, nullptr);
-      const std::pair<const char*, std::pair<const std::vector<float>*, const std::vector<float>*>> arrays[] = {
-          {"means", {&got.model.means, &want.model.means}},
-          {"log_scales", {&got.model.log_scales, &want.model.log_scales}},
-          {"quats", {&got.model.quats, &want.model.quats}},
-          {"opacity_logits", {&got.model.opacity_logits, &want.model.opacity_logits}},
-          {"sh_dc", {&got.model.sh_dc, &want.model.sh_dc}},
-          {"sh_rest", {&got.model.sh_rest, &want.model.sh_rest}},
-          {"grad_mean2d_ndc", {&got.grad_mean2d_ndc, &want.grad_mean2d_ndc}},
-      };
+      const auto arrays = gradient_arrays(got, want);
       for (const auto& [name, pair] : arrays) {
         const std::vector<float>& g = *pair.first;
         const std::vector<float>& w = *pair.second;

@@ -5,7 +5,6 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
-#include <cstring>
 
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/float_order.hpp"
