@@ -149,6 +149,49 @@ TEST(Trainer, SameSeedSameModelAndResumeIsBitIdentical) {
   EXPECT_NE(d.model().means, a.model().means);
 }
 
+// --stop-at N: the run stops after iteration N of its schedule with a checkpoint there, the test views
+// scored and no results.json; resumed in place with the same options, it ends in the straight run's model.
+TEST(Trainer, StopAtCutsTheScheduleAndResumesToTheStraightRunsModel) {
+  const auto dir = test::scratch_dir();
+  auto cfg = fern_config(dir / "straight", "dropgaussian", 30);
+  cfg.densify_from = 5;
+  cfg.densify_every = 5;
+  Trainer straight(cfg);
+  straight.run();
+
+  auto cfg_s = cfg;
+  cfg_s.model_dir = (dir / "stopped").string();
+  cfg_s.stop_at = 15;
+  {
+    Trainer stopped(cfg_s);
+    stopped.run();
+    EXPECT_EQ(stopped.iteration(), 15);
+  }
+  const fs::path out = dir / "stopped";
+  EXPECT_TRUE(fs::is_regular_file(out / "chkpnt15.bin"));
+  EXPECT_FALSE(fs::exists(out / "results.json"));
+  std::ifstream log(out / "train_log.jsonl");
+  std::string line;
+  bool tested_at_stop = false;
+  while (std::getline(log, line)) {
+    const auto j = nlohmann::json::parse(line);
+    if (j.value("event", "") == "test" && j.at("iteration") == 15) tested_at_stop = j.at("psnr").get<double>() > 5.0;
+  }
+  EXPECT_TRUE(tested_at_stop) << "no test event at the stop iteration";
+
+  Trainer resumed(cfg_s, out / "chkpnt15.bin");
+  EXPECT_EQ(resumed.iteration(), 15);
+  resumed.run();
+  EXPECT_EQ(resumed.iteration(), 30);
+  expect_same_model(resumed.model(), straight.model());
+  EXPECT_TRUE(fs::is_regular_file(out / "results.json"));
+
+  auto bad = cfg_s;
+  bad.stop_at = 31;
+  EXPECT_EQ(test::error_of([&] { cfg_s.validate(); }), "");  // the stopped run's options are valid
+  EXPECT_NE(test::error_of([&] { bad.validate(); }).find("--stop-at 31 is outside 0..30"), std::string::npos);
+}
+
 // Regularisers stacked on a method train, resume bit-identically (the noise has no state to lose) and
 // change the model; the decay lowers the opacities.
 TEST(Trainer, RegularisersTrainAndResumeBitIdentically) {

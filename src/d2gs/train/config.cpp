@@ -37,6 +37,8 @@ void TrainConfig::validate() const {
     if (it < 1 || it > iterations) fail("checkpoint iteration {} is outside 1..{}", it, iterations);
   for (int it : test_iterations)
     if (it < 1 || it > iterations) fail("test iteration {} is outside 1..{}", it, iterations);
+  if (stop_at < 0 || stop_at > iterations)
+    fail("option --stop-at {} is outside 0..{} (0: train to --iterations)", stop_at, iterations);
 }
 
 SceneLoadOptions scene_load_options(const TrainConfig& c) {

@@ -95,6 +95,7 @@ struct TrainConfig {
   std::vector<int> save_iterations;        // empty = the last iteration only
   std::vector<int> checkpoint_iterations;  // optimiser state for --resume
   std::vector<int> test_iterations;        // test-view PSNR/SSIM logged at these
+  int stop_at = 0;  // > 0: stop after this iteration of the schedule (checkpoint + test metrics), resumable
   int log_every = 10;
   bool quiet = false;
 

@@ -526,6 +526,13 @@ std::vector<TrainOption> declare() {
                            [](auto& c) -> auto& { return c.checkpoint_iterations; }, closed(1, 2147483647)));
   t.push_back(integer_list({"test_iterations", outputs, "Iterations at which test PSNR/SSIM are logged", Output},
                            [](auto& c) -> auto& { return c.test_iterations; }, closed(1, 2147483647)));
+  t.push_back(number({"stop_at", outputs,
+                      "Stop after this iteration of the --iterations schedule (0 = train to the end): the full "
+                      "training state is saved as chkpntN.bin and the test views scored, as at a "
+                      "--test-iterations entry; --resume chkpntN.bin continues the same run. For short proxy runs "
+                      "and for splitting a long run",
+                      Output},
+                     [](auto& c) -> auto& { return c.stop_at; }, at_least(0)));
   t.push_back(number({"log_every", outputs, "Iterations between lines of train_log.jsonl", Output},
                      [](auto& c) -> auto& { return c.log_every; }, positive()));
   t.push_back(flag({"quiet", outputs, "No progress line", Output}, [](auto& c) -> auto& { return c.quiet; }));

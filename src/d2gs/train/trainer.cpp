@@ -489,9 +489,11 @@ void Trainer::save_and_test(int t) {
   const auto listed = [t](const std::vector<int>& at) { return std::find(at.begin(), at.end(), t) != at.end(); };
   if (cfg.save_iterations.empty() ? t == cfg.iterations : listed(cfg.save_iterations))
     write_gaussians_ply(s.out() / "point_cloud" / fmt::format("iteration_{}", t) / "point_cloud.ply", s.model);
-  if (listed(cfg.test_iterations)) {
+  // A --stop-at iteration is scored too, so that a stopped run says where it stands.
+  if (listed(cfg.test_iterations) || (t == cfg.stop_at && t < cfg.iterations)) {
     const auto e = evaluate_test_views();
     s.log << nlohmann::json{{"event", "test"}, {"iteration", t}, {"psnr", e.psnr}, {"ssim", e.ssim}}.dump() << '\n';
+    s.log.flush();
     if (!cfg.quiet) spdlog::info("iteration {}: test PSNR {:.3f} SSIM {:.4f}", t, e.psnr, e.ssim);
   }
 }
@@ -504,10 +506,13 @@ void Trainer::run() {
   TrainingProgress progress(cfg.method, start, cfg.iterations, cfg.quiet);
   s.outputs = true;  // saves and test metrics, from step()
   profile::reset();
-  while (s.iteration < cfg.iterations) {
+  // --stop-at: the same schedule, cut after that iteration (a checkpoint there, so that --resume continues).
+  const bool stops_early = cfg.stop_at > 0 && cfg.stop_at < cfg.iterations && start < cfg.stop_at;
+  const int end = stops_early ? cfg.stop_at : cfg.iterations;
+  while (s.iteration < end) {
     const IterationRecord rec = step();
     const int t = rec.iteration;
-    if (checkpoints.count(t)) save_checkpoint(s.out() / fmt::format("chkpnt{}.bin", t));
+    if (checkpoints.count(t) || (stops_early && t == end)) save_checkpoint(s.out() / fmt::format("chkpnt{}.bin", t));
     progress.update(t, rec.loss, rec.gaussians, s.elapsed());
   }
   s.outputs = false;
@@ -516,7 +521,12 @@ void Trainer::run() {
     const std::string table = profile::format_table(profile::totals(), "step");
     if (!table.empty())  // asked for by the environment: printed even with --quiet
       std::fprintf(stderr, "D2GS_PROFILE: wall time per stage, iterations %d-%d, %d OpenMP threads\n%s", start + 1,
-                   cfg.iterations, omp_get_max_threads(), table.c_str());
+                   end, omp_get_max_threads(), table.c_str());
+  }
+  if (stops_early) {
+    spdlog::info("stopped at iteration {} of {} (--stop-at); continue with --resume {}", end, cfg.iterations,
+                 (s.out() / fmt::format("chkpnt{}.bin", end)).string());
+    return;
   }
   // Resumed from the checkpoint of the run's last iteration (check_resume allows no other at that
   // iteration): nothing to train, and the model is the final one, since the last iteration changes nothing
