@@ -5,12 +5,7 @@
 # 300-iteration fern D²GS training from the published cloud (d2gs train, wall time of the command).
 # THREADS overrides the list; ITERS the training length.
 set -u
-R=$PWD; P=$R/.devpack
-[ -d /tmp/devlib ] || tar xJf $P/devlib.tar.xz -C /tmp
-[ -d $P/bin ] || tar xJf $P/devbin.tar.xz -C $P
-export LD_LIBRARY_PATH=/tmp/devlib:/usr/local/cuda/lib64:/usr/local/cuda/targets/x86_64-linux/lib
-[ -e "$R/../shared" ] || ln -s "$P/shared" "$R/../shared"
-data=$R/../shared/data
+source "$(dirname "$0")/unpack.sh"
 lscpu | grep -E "Model name|^CPU\(s\)|Thread|Flags" | cut -c1-120
 for th in ${THREADS:-1 2 4 8 16}; do
   echo "== $th threads"

@@ -6,12 +6,7 @@
 #   THREADS OpenMP threads (16)
 # D²GS runs use the release preset with fern's values (--scene-preset fern), as the earlier parity rows.
 set -u
-R=$PWD; P=$R/.devpack
-[ -d /tmp/devlib ] || tar xJf $P/devlib.tar.xz -C /tmp
-[ -d $P/bin ] || tar xJf $P/devbin.tar.xz -C $P
-export LD_LIBRARY_PATH=/tmp/devlib:/usr/local/cuda/lib64:/usr/local/cuda/targets/x86_64-linux/lib
-[ -e "$R/../shared" ] || ln -s "$P/shared" "$R/../shared"
-data=$R/../shared/data
+source "$(dirname "$0")/unpack.sh"
 psnr() {  # results.json -> "mean (v0 / v8 / v16)"
   tr -d ' \n' < "$1" | grep -o '"PSNR":[-0-9.e]*' | cut -d: -f2 |
     awk 'NR==1{m=$1} NR>1{v=v (v==""?"":" / ") sprintf("%.2f",$1)} END{printf "%.3f (%s)", m, v}'
