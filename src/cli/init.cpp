@@ -125,6 +125,11 @@ Run add_init_command(CLI::App& app) {
                   "PatchMatch fusion: largest reprojection error (pixels) of the point into a joining pixel "
                   "(COLMAP's max_reproj_error)")
       ->capture_default_str();
+  cmd->add_option("--fusion-max-color-difference", o->geometry.patch_match_fusion.max_color_difference,
+                  "PatchMatch fusion: drop a fused point whose colour differs from the (blurred) image by more than "
+                  "this mean absolute RGB difference in a view where no surface hides it (0: off; ours, not "
+                  "COLMAP's: docs/training.md)")
+      ->capture_default_str();
   cmd->add_option("--compare-cloud", o->compare_cloud,
                   "Also measure the dense cloud against this PLY (e.g. another pipeline's fused cloud): accuracy "
                   "(ours to theirs) and completeness (theirs to ours), written to DIR/compare_cloud.json");

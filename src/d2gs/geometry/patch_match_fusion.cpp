@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include <opencv2/imgproc.hpp>
+
 #include "d2gs/core/error.hpp"
 #include "d2gs/geometry/fusion.hpp"
 
@@ -15,10 +17,15 @@ void validate(const PatchMatchFusionOptions& o) {
   if (o.max_traversal_depth < 1) fail("fusion: max traversal depth must be at least 1, got {}", o.max_traversal_depth);
   if (o.min_pixels < 1) fail("fusion: min pixels per point must be at least 1, got {}", o.min_pixels);
   if (o.pixel_stride < 1) fail("fusion: pixel stride must be at least 1, got {}", o.pixel_stride);
+  if (!(o.max_color_difference >= 0 && o.max_color_difference <= 1))
+    fail("fusion: max colour difference must be in [0, 1] (0: off), got {}", o.max_color_difference);
+  if (!(o.color_visibility_margin >= 1 && o.color_visibility_margin <= 2))
+    fail("fusion: colour visibility margin must be in [1, 2], got {}", o.color_visibility_margin);
 }
 
 PointCloud fuse_patch_match(const std::vector<const Camera*>& cameras, const std::vector<const Image*>& images,
-                            const std::vector<PatchMatchMap>& maps, const PatchMatchFusionOptions& o) {
+                            const std::vector<PatchMatchMap>& maps, const PatchMatchFusionOptions& o,
+                            PatchMatchFusionStats* stats) {
   validate(o);
   const std::size_t n = cameras.size();
   if (images.size() != n || maps.size() != n)
@@ -100,7 +107,73 @@ PointCloud fuse_patch_match(const std::vector<const Camera*>& cameras, const std
         cloud.colors.push_back(rgb);
       }
   }
+  std::size_t dropped = 0;
+  const std::size_t fused = cloud.size();
+  if (o.max_color_difference > 0) {
+    std::vector<const DepthMap*> depths;
+    for (const auto& m : maps) depths.push_back(&m.depth);
+    dropped = drop_color_disagreeing_points(cloud, cameras, images, depths, o.max_color_difference,
+                                            o.color_visibility_margin);
+  }
+  if (stats) *stats = {fused, dropped};
   return cloud;
+}
+
+std::size_t drop_color_disagreeing_points(PointCloud& cloud, const std::vector<const Camera*>& cameras,
+                                          const std::vector<const Image*>& images,
+                                          const std::vector<const DepthMap*>& depths, double max_difference,
+                                          double visibility_margin) {
+  if (!(max_difference > 0) || cloud.empty()) return 0;
+  const std::size_t n = cameras.size();
+  if (images.size() != n || depths.size() != n)
+    fail("colour test: {} cameras, {} images and {} depth maps", n, images.size(), depths.size());
+  if (cloud.colors.size() != cloud.size()) fail("colour test: the cloud has no colour per point");
+  // The images blurred (5x5 Gaussian, sigma 1 px), as three channels.
+  std::vector<cv::Mat> blurred(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const Image& img = *images[i];
+    const Camera& c = *cameras[i];
+    if (img.width != c.width || img.height != c.height || depths[i]->width != c.width ||
+        depths[i]->height != c.height)
+      fail("colour test: {}: image and depth map must have the camera's size {}x{}", c.image_name, c.width, c.height);
+    cv::Mat rgb(img.height, img.width, CV_32FC3);
+    for (int y = 0; y < img.height; ++y)
+      for (int x = 0; x < img.width; ++x)
+        for (int k = 0; k < 3; ++k) rgb.at<cv::Vec3f>(y, x)[k] = img.at(x, y, std::min(k, img.channels - 1));
+    cv::GaussianBlur(rgb, blurred[i], cv::Size(5, 5), 1.0, 1.0, cv::BORDER_REFLECT_101);
+  }
+  std::vector<std::uint8_t> drop(cloud.size(), 0);
+#pragma omp parallel for schedule(static)
+  for (std::ptrdiff_t k = 0; k < static_cast<std::ptrdiff_t>(cloud.size()); ++k) {
+    const auto pk = static_cast<std::size_t>(k);
+    const glm::dvec3 X(cloud.positions[pk]);
+    glm::dvec3 colour;
+    for (int ch = 0; ch < 3; ++ch) colour[ch] = cloud.colors[pk][ch] / 255.0;
+    for (std::size_t i = 0; i < n && !drop[pk]; ++i) {
+      const Camera& c = *cameras[i];
+      const glm::dvec3 q = c.R_world_to_cam * X + c.t_world_to_cam;
+      if (!(q.z > 0.0)) continue;
+      const double u = c.fx * q.x / q.z + c.cx, v = c.fy * q.y / q.z + c.cy;
+      if (!(u >= 0.0 && v >= 0.0 && u < c.width && v < c.height)) continue;
+      const int x = static_cast<int>(u), y = static_cast<int>(v);
+      const double d = depths[i]->at(x, y);
+      if (d > 0.0 && q.z > visibility_margin * d) continue;  // hidden behind this view's surface
+      const cv::Vec3f& b = blurred[i].at<cv::Vec3f>(y, x);
+      const double diff = (std::abs(b[0] - colour[0]) + std::abs(b[1] - colour[1]) + std::abs(b[2] - colour[2])) / 3.0;
+      if (diff > max_difference) drop[pk] = 1;
+    }
+  }
+  PointCloud kept;
+  const bool normals = cloud.normals.size() == cloud.size();
+  for (std::size_t k = 0; k < cloud.size(); ++k) {
+    if (drop[k]) continue;
+    kept.positions.push_back(cloud.positions[k]);
+    kept.colors.push_back(cloud.colors[k]);
+    if (normals) kept.normals.push_back(cloud.normals[k]);
+  }
+  const std::size_t dropped = cloud.size() - kept.size();
+  cloud = std::move(kept);
+  return dropped;
 }
 
 }  // namespace d2gs

@@ -116,6 +116,11 @@ std::string options_key(const TrainingGeometryOptions& o, int training_resolutio
                                {"max_traversal_depth", f.max_traversal_depth},
                                {"min_pixels", f.min_pixels},
                                {"pixel_stride", f.pixel_stride}};
+    // Only when on, so that the manifests written before the test existed still match.
+    if (f.max_color_difference > 0) {
+      j["patch_match_fusion"]["max_color_difference"] = f.max_color_difference;
+      j["patch_match_fusion"]["color_visibility_margin"] = f.color_visibility_margin;
+    }
   }
   return j.dump();
 }
@@ -364,7 +369,11 @@ void dense_patch_match(TrainingGeometry& g, const std::vector<const Camera*>& ca
   for (const auto& m : maps) valid += m.depth.valid_count();
   spdlog::info("init: PatchMatch stereo on {} views at {}x{}: {} filtered depths ({:.2f} s)", cams.size(),
                cams[0]->width, cams[0]->height, valid, timer.done("stereo"));
-  g.dense = fuse_patch_match(cams, images, maps, options.patch_match_fusion);
+  PatchMatchFusionStats stats;
+  g.dense = fuse_patch_match(cams, images, maps, options.patch_match_fusion, &stats);
+  if (options.patch_match_fusion.max_color_difference > 0)
+    spdlog::info("init: fusion: the colour test (max difference {:.2f}) removed {} of {} fused points",
+                 options.patch_match_fusion.max_color_difference, stats.color_dropped, stats.fused);
   g.depth.clear();
   for (const auto& m : maps) g.depth.push_back(m.depth);
 }

@@ -362,6 +362,12 @@ std::vector<TrainOption> declare() {
                       "SGBM at the training resolution, as `d2gs init --dense-method sgbm`)"},
                      [](auto& c) -> auto& { return c.init_dense_method; },
                      {{"sgbm", "sgbm"}, {"patchmatch", "patchmatch"}}));
+  t.push_back(number({"init_color_filter", init,
+                      "PatchMatch fusion of --init dense: drop a fused point whose colour differs from a training "
+                      "image (blurred) by more than this mean absolute RGB difference where no surface hides it: "
+                      "mid-air points seen through to another colour (0: off; as `d2gs init "
+                      "--fusion-max-color-difference`; docs/training.md)"},
+                     [](auto& c) -> auto& { return c.init_color_filter; }, closed(0.0, 1.0)));
   t.push_back(number({"random_points", init,
                       "Point count of --init random (random pixel rays of the training views, uniform inverse depth "
                       "within the scene's depth bounds: docs/training.md)"},
