@@ -11,6 +11,7 @@
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/npy.hpp"
+#include "d2gs/geometry/depth_preview.hpp"
 #include "d2gs/geometry/training_geometry.hpp"
 #include "d2gs/model/ply.hpp"
 #include "d2gs/scene/split.hpp"
@@ -74,6 +75,33 @@ TEST(TrainingGeometry, Fern3ViewsPointsAccuracyAndOnlyTrainingImages) {
   EXPECT_GT(cloud_accuracy(shifted, f.scene.sfm_points).median_fraction(), 0.006);
   ASSERT_EQ(g.depth.size(), 3u);
   for (const auto& d : g.depth) EXPECT_GT(static_cast<double>(d.valid_count()) / static_cast<double>(d.depth.size()), 0.2);
+}
+
+// The depth pictures: one inverse-depth range for all views (2nd–98th percentile), near red, far blue
+// (turbo's ends), no depth black, equal depths equal colours across views.
+TEST(DepthPreview, NearIsRedFarIsBlueNoDepthIsBlack) {
+  DepthMap a{100, 1, std::vector<float>(100)}, b{2, 1, {0.0f, 0.0f}};
+  for (int x = 0; x < 100; ++x) a.depth[static_cast<std::size_t>(x)] = x == 50 ? 0.0f : 1.0f + 0.09f * static_cast<float>(x);
+  const auto range = inverse_depth_range({a, b});
+  // 99 depths: the 98th percentile of 1/z is the third nearest (x = 2), the 2nd the second farthest (x = 98).
+  EXPECT_NEAR(range.second, 1.0 / (1.0 + 0.09 * 2), 1e-6);
+  EXPECT_NEAR(range.first, 1.0 / (1.0 + 0.09 * 98), 1e-6);
+  const Image p = depth_preview(a, range);
+  ASSERT_EQ(p.width, 100);
+  ASSERT_EQ(p.channels, 3);
+  EXPECT_GT(p.at(0, 0, 0), 0.4f);   // nearest: turbo's dark-red end
+  EXPECT_LT(p.at(0, 0, 2), 0.1f);
+  EXPECT_LT(p.at(99, 0, 0), 0.25f);  // farthest: turbo's dark-blue end (48, 18, 59)
+  EXPECT_GT(p.at(99, 0, 2), p.at(99, 0, 0));
+  EXPECT_EQ(p.at(99, 0, 2), p.at(98, 0, 2));  // clamped beyond the range
+  for (int k = 0; k < 3; ++k) EXPECT_EQ(p.at(50, 0, k), 0.0f);  // no depth
+  // The same depth in another map gets the same colour.
+  DepthMap c{1, 1, {a.depth[20]}};
+  const Image q = depth_preview(c, range);
+  for (int k = 0; k < 3; ++k) EXPECT_EQ(q.at(0, 0, k), p.at(20, 0, k));
+  EXPECT_EQ(inverse_depth_range({b}), std::make_pair(0.0, 0.0));
+  const Image black = depth_preview(b, {0.0, 0.0});
+  for (float v : black.pixels) EXPECT_EQ(v, 0.0f);
 }
 
 TEST(TrainingGeometry, SameSeedSameClouds) {
@@ -182,7 +210,7 @@ TEST(TrainingGeometry, InitWritesThePublishedLayoutAndTrainReusesIt) {
     EXPECT_NE(r.output.find(step), std::string::npos) << step << "\n" << r.output;
   const fs::path views = scene / "3_views";
   for (const char* file : {"init.json", "sparse/points3D.ply", "dense/fused.ply", "depth/image001.npy",
-                           "depth/image010_valid.png", "depth/image019.npy"})
+                           "depth/image010_valid.png", "depth/image010_depth.png", "depth/image019.npy"})
     EXPECT_TRUE(fs::exists(views / file)) << file;
   const auto m = nlohmann::json::parse(read_file(views / "init.json"));
   for (const char* step : {"read images", "sift", "matching", "triangulation", "stereo", "fusion"})

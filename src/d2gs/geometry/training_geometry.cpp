@@ -12,6 +12,7 @@
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/npy.hpp"
 #include "d2gs/core/random.hpp"
+#include "d2gs/geometry/depth_preview.hpp"
 #include "d2gs/geometry/features.hpp"
 #include "d2gs/geometry/knn.hpp"
 #include "d2gs/geometry/tracks.hpp"
@@ -458,6 +459,7 @@ void write_training_geometry(const fs::path& dir, const Scene& scene, const Trai
     fs::create_directories(dir / "dense");
     fs::create_directories(dir / "depth");
     write_point_cloud_ply(dir / "dense" / "fused.ply", g.dense);
+    const auto inverse_range = inverse_depth_range(g.depth);
     for (std::size_t i = 0; i < g.views.size(); ++i) {
       const Camera& cam = scene.cameras[static_cast<std::size_t>(g.views[i])];
       const std::string stem = fs::path(cam.image_name).stem().string();
@@ -467,6 +469,7 @@ void write_training_geometry(const fs::path& dir, const Scene& scene, const Trai
       Image mask(d.width, d.height, 1);
       for (std::size_t p = 0; p < d.depth.size(); ++p) mask.pixels[p] = d.depth[p] > 0.0f ? 1.0f : 0.0f;
       write_image(dir / "depth" / (stem + "_valid.png"), mask);
+      write_image(dir / "depth" / (stem + "_depth.png"), depth_preview(d, inverse_range));
       depth_files.push_back(stem + ".npy");
     }
   }
