@@ -148,6 +148,9 @@ Run add_init_command(CLI::App& app) {
     }
     validate(g.patch_match);
     validate(g.patch_match_fusion);
+    if (g.patch_match_fusion.max_color_difference > 0 && !(g.dense && g.dense_method == DenseMethod::PatchMatch))
+      fail("--fusion-max-color-difference is a test of the PatchMatch fusion: it needs --dense-method patchmatch "
+           "and a dense cloud");
     PointCloud compare;
     if (!o->compare_cloud.empty()) compare = read_point_cloud_ply(o->compare_cloud);  // before the work
     const std::filesystem::path dir =
