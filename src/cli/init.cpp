@@ -128,7 +128,7 @@ Run add_init_command(CLI::App& app) {
   cmd->add_option("--fusion-max-color-difference", o->geometry.patch_match_fusion.max_color_difference,
                   "PatchMatch fusion: drop a fused point whose colour differs from the (blurred) image by more than "
                   "this mean absolute RGB difference in a view where no surface hides it (0: off; ours, not "
-                  "COLMAP's: docs/training.md)")
+                  "COLMAP's; SGBM ignores it: docs/training.md)")
       ->capture_default_str();
   cmd->add_option("--compare-cloud", o->compare_cloud,
                   "Also measure the dense cloud against this PLY (e.g. another pipeline's fused cloud): accuracy "
@@ -148,9 +148,6 @@ Run add_init_command(CLI::App& app) {
     }
     validate(g.patch_match);
     validate(g.patch_match_fusion);
-    if (g.patch_match_fusion.max_color_difference > 0 && !(g.dense && g.dense_method == DenseMethod::PatchMatch))
-      fail("--fusion-max-color-difference is a test of the PatchMatch fusion: it needs --dense-method patchmatch "
-           "and a dense cloud");
     PointCloud compare;
     if (!o->compare_cloud.empty()) compare = read_point_cloud_ply(o->compare_cloud);  // before the work
     const std::filesystem::path dir =

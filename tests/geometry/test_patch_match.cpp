@@ -455,6 +455,8 @@ TEST(PatchMatchFusion, ColourTestDropsMidAirPointsAndKeepsTheSurface) {
   EXPECT_EQ(drop_color_disagreeing_points(seen, v.cam_ptrs(), v.image_ptrs(), depths, 0.10, 2.0), 1u);
   // Fusion with the test on gives a subset of the cloud without it, and says how many it removed.
   PatchMatchFusionOptions fo;
+  EXPECT_EQ(fo.max_color_difference, 0.10);  // on by default
+  fo.max_color_difference = 0.0;
   fo.pixel_stride = 2;
   PatchMatchFusionStats stats;
   const PointCloud plain = fuse_patch_match(v.cam_ptrs(), v.image_ptrs(), synthetic_maps(), fo, &stats);

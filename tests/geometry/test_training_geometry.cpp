@@ -228,18 +228,6 @@ TEST(TrainingGeometry, InitWritesThePublishedLayoutAndTrainReusesIt) {
 }
 
 // An output folder under a file used to fail with "internal: filesystem error" after the stereo work.
-// The colour test belongs to PatchMatch's fusion: asked of SGBM it is an error, before any work.
-TEST(TrainingGeometry, ColourTestWithoutPatchMatchIsAnError) {
-  const auto dir = test::scratch_dir();
-  const auto r = test::run_cli(fmt::format("init -s '{}' -r 8 --n-views 3 --dense-method sgbm "
-                                           "--fusion-max-color-difference 0.1 -o '{}'",
-                                           fern().string(), (dir / "out").string()));
-  EXPECT_EQ(r.exit_code, 1) << r.output;
-  EXPECT_NE(r.output.find("d2gs: error: --fusion-max-color-difference is a test of the PatchMatch fusion"),
-            std::string::npos) << r.output;
-  EXPECT_FALSE(fs::exists(dir / "out"));
-}
-
 TEST(TrainingGeometry, InitOutputUnderAFileFailsBeforeTheWork) {
   const auto dir = test::scratch_dir();
   write_file_atomic(dir / "file", "x");

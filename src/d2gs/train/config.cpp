@@ -30,10 +30,6 @@ void TrainConfig::validate() const {
     if (std::filesystem::is_directory(init, ec))
       fail("option --init '{}' is a folder; expected dense, sparse, random, sfm-all-views or a PLY file", init);
   }
-  if (init_color_filter > 0 && (init != "dense" || init_dense_method != "patchmatch"))
-    fail("option --init-color-filter is a test of the PatchMatch fusion: it needs --init dense with "
-         "--init-dense-method patchmatch (got --init {} --init-dense-method {})",
-         init, init_dense_method);
   check_output_folder(model_dir);  // a -m under a file fails here, before any work
   for (int it : save_iterations)
     if (it < 1 || it > iterations) fail("save iteration {} is outside 1..{}", it, iterations);

@@ -46,8 +46,8 @@ struct TrainConfig {
   // stereo of --init dense / sparse and of --dafe-prior stereo: "patchmatch" or "sgbm" (d2gs init --dense-method;
   // docs/benchmarks.md, "What the far background is worth")
   std::string init_dense_method = "patchmatch";
-  // PatchMatch fusion's colour test (patch_match_fusion.hpp, max_color_difference): 0 = off
-  double init_color_filter = 0.0;
+  // PatchMatch fusion's colour test (patch_match_fusion.hpp, max_color_difference): 0 = off; SGBM ignores it
+  double init_color_filter = 0.10;
   int random_points = 10000;
 
   // optimisation

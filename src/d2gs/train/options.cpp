@@ -365,7 +365,7 @@ std::vector<TrainOption> declare() {
   t.push_back(number({"init_color_filter", init,
                       "PatchMatch fusion of --init dense: drop a fused point whose colour differs from a training "
                       "image (blurred) by more than this mean absolute RGB difference where no surface hides it: "
-                      "mid-air points seen through to another colour (0: off; as `d2gs init "
+                      "mid-air points seen through to another colour (0: off; SGBM ignores it; as `d2gs init "
                       "--fusion-max-color-difference`; docs/training.md)"},
                      [](auto& c) -> auto& { return c.init_color_filter; }, closed(0.0, 1.0)));
   t.push_back(number({"random_points", init,
