@@ -163,16 +163,11 @@ std::size_t drop_color_disagreeing_points(PointCloud& cloud, const std::vector<c
       if (diff > max_difference) drop[pk] = 1;
     }
   }
-  PointCloud kept;
-  const bool normals = cloud.normals.size() == cloud.size();
-  for (std::size_t k = 0; k < cloud.size(); ++k) {
-    if (drop[k]) continue;
-    kept.positions.push_back(cloud.positions[k]);
-    kept.colors.push_back(cloud.colors[k]);
-    if (normals) kept.normals.push_back(cloud.normals[k]);
-  }
+  std::vector<std::size_t> kept;
+  for (std::size_t k = 0; k < cloud.size(); ++k)
+    if (!drop[k]) kept.push_back(k);
   const std::size_t dropped = cloud.size() - kept.size();
-  cloud = std::move(kept);
+  cloud = select_points(cloud, kept);
   return dropped;
 }
 

@@ -335,13 +335,7 @@ TrainingGeometry build_training_geometry(const Scene& scene, const std::vector<i
       std::swap(idx[i], idx[i + rng.below(idx.size() - i)]);
     idx.resize(options.max_dense_points);
     std::sort(idx.begin(), idx.end());
-    PointCloud sub;
-    for (std::size_t i : idx) {
-      sub.positions.push_back(g.dense.positions[i]);
-      sub.colors.push_back(g.dense.colors[i]);
-      if (!g.dense.normals.empty()) sub.normals.push_back(g.dense.normals[i]);
-    }
-    g.dense = std::move(sub);
+    g.dense = select_points(g.dense, idx);
   }
   std::size_t valid = 0, total = 0;
   for (const auto& d : g.depth) valid += d.valid_count(), total += d.depth.size();
