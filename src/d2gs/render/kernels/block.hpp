@@ -63,6 +63,13 @@ D2GS_HD int blocks_for(long long n, int block = kBlockThreads) {
   return static_cast<int>((n + block - 1) / block);
 }
 
+// Host side: launches Body over n items on `backend` (render/kernels/pipeline.hpp's backends), one
+// thread per item in blocks of kBlockThreads.
+template <class Body, class Backend, class Args>
+void launch_per_item(Backend& backend, long long n, const Args& args) {
+  backend.template launch<Body>(blocks_for(n), kBlockThreads, args);
+}
+
 // The commonest kernel: one thread per item, no shared memory, one phase; thread i < args.n runs
 // Item(i, args). Projection, SH, tile counts, key emission and Adam are this.
 template <class Args, void (*Item)(int, const Args&)>

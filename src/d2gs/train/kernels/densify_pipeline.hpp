@@ -53,7 +53,7 @@ public:
     a.logits = logits.data();
     a.exp_avg = m.data();
     a.exp_avg_sq = v.data();
-    launch<OpacityResetKernel>(static_cast<long long>(n), a);
+    render::kernels::launch_per_item<OpacityResetKernel>(backend_, static_cast<long long>(n), a);
     backend_.download(model.opacity_logits, logits, n);
     backend_.download(adam.exp_avg.opacity_logits, m, n);
     backend_.download(adam.exp_avg_sq.opacity_logits, v, n);
@@ -66,11 +66,6 @@ private:
   static std::vector<float>* attribute(Gaussians& g, int k) {
     std::vector<float>* a[kAttributes] = {&g.means, &g.log_scales, &g.quats, &g.opacity_logits, &g.sh_dc, &g.sh_rest};
     return a[k];
-  }
-
-  template <class Body, class Args>
-  void launch(long long n, const Args& args) {
-    backend_.template launch<Body>(render::kernels::blocks_for(n), render::kernels::kBlockThreads, args);
   }
 
   // The split's normals (3 per child, the CPU's order and draws) into normals_; rng left where the CPU's is.
@@ -92,7 +87,7 @@ private:
       a.n = static_cast<int>(chunks);
       counts_.resize(static_cast<std::size_t>(chunks));
       a.counts = counts_.data();
-      launch<PolarCountKernel>(chunks, a);
+      render::kernels::launch_per_item<PolarCountKernel>(backend_, chunks, a);
       render::kernels::inclusive_scan(backend_, counts_.data(), a.n, scan_levels_);
       if (backend_.read(counts_, static_cast<std::size_t>(chunks - 1)) >= pairs) break;
       chunks *= 2;
@@ -103,7 +98,7 @@ private:
     a.normals = normals_.data();
     a.end_state = end_state_.data();
     a.end_spare = end_spare_.data();
-    launch<PolarNormalsKernel>(chunks, a);
+    render::kernels::launch_per_item<PolarNormalsKernel>(backend_, chunks, a);
     std::vector<uint64_t> words;
     backend_.download(words, end_state_, 4);
     Rng::State after = before;
@@ -149,7 +144,7 @@ private:
     f.min_opacity = min_opacity;
     flags_.resize(static_cast<std::size_t>(kSegments) * n);
     f.flags = flags_.data();
-    launch<DensifyFlagsKernel>(nn, f);
+    render::kernels::launch_per_item<DensifyFlagsKernel>(backend_, nn, f);
     render::kernels::inclusive_scan(backend_, flags_.data(), kSegments * nn, scan_levels_);
     int end[kSegments];
     for (int s = 0; s < kSegments; ++s) end[s] = backend_.read(flags_, static_cast<std::size_t>(s) * n + n - 1);
@@ -179,7 +174,7 @@ private:
     d.normals = split > 0 ? normals_.data() : nullptr;
     source_.resize(rows);
     d.source = source_.data();
-    launch<DensifyScatterKernel>(nn, d);
+    render::kernels::launch_per_item<DensifyScatterKernel>(backend_, nn, d);
 
     for (int t = 0; t < kTensors; ++t)
       for (int k = 0; k < kAttributes; ++k)

@@ -53,8 +53,7 @@ void adam_step(Backend& backend, Gaussians& model, const Gaussians& grads, AdamS
     a.exp_avg = m.data();
     a.exp_avg_sq = v.data();
     a.s = adam_scalars(rate, bias1, bias2);
-    backend.template launch<AdamKernel>(render::kernels::blocks_for(static_cast<long long>(n)),
-                                        render::kernels::kBlockThreads, a);
+    render::kernels::launch_per_item<AdamKernel>(backend, static_cast<long long>(n), a);
     backend.download(param, p, n);
     backend.download(exp_avg, m, n);
     backend.download(exp_avg_sq, v, n);
@@ -87,8 +86,7 @@ double l1_loss(Backend& backend, const float* a, const float* b, std::size_t cou
   args.grad = grad ? dg.data() : nullptr;
   args.g = scale / static_cast<float>(count);
   args.sum = sum.data();
-  backend.template launch<L1Kernel>(render::kernels::blocks_for(static_cast<long long>(count)),
-                                    render::kernels::kBlockThreads, args);
+  render::kernels::launch_per_item<L1Kernel>(backend, static_cast<long long>(count), args);
   if (grad) {
     std::vector<float> out;
     backend.download(out, dg, count);

@@ -64,7 +64,7 @@ void dropout_mask_of(Backend& backend, std::size_t n, const float* probabilities
   }
   a.multiplier = out.data();
   a.end_state = end_state.data();
-  backend.template launch<DropoutMaskKernel>(render::kernels::blocks_for(chunks), render::kernels::kBlockThreads, a);
+  render::kernels::launch_per_item<DropoutMaskKernel>(backend, chunks, a);
   backend.download(multiplier, out, n);
   std::vector<uint64_t> after;
   backend.download(after, end_state, 4);
@@ -115,8 +115,7 @@ void add_gradient_stats(Backend& backend, GradientStats& stats, const std::vecto
   a.radii = r.data();
   a.sum = sum.data();
   a.count = count.data();
-  backend.template launch<GradientStatsKernel>(render::kernels::blocks_for(static_cast<long long>(n)),
-                                               render::kernels::kBlockThreads, a);
+  render::kernels::launch_per_item<GradientStatsKernel>(backend, static_cast<long long>(n), a);
   std::vector<float> sums, counts;
   backend.download(sums, sum, n);
   backend.download(counts, count, n);
@@ -159,7 +158,7 @@ public:
     d.depth = depth_.data();
     d.keys = keys_.data();
     d.index = index_.data();
-    launch<GaussianDepthKernel>(n, d);
+    render::kernels::launch_per_item<GaussianDepthKernel>(backend_, n, d);
     // The ranks 0, ⌊0.33·N⌋, ⌊0.67·N⌋ and N − 1 of the depths: their keys sorted (32 bits).
     backend_.sort_pairs(keys_, keys_sorted_, index_, index_sorted_, n, 32);
     DdDropProbabilityArgs p;
@@ -171,7 +170,7 @@ public:
     p.density_score = density_.data();
     p.terms = dd_drop_terms(options, iteration);
     p.probabilities = probabilities_.data();
-    launch<DdDropProbabilityKernel>(n, p);
+    render::kernels::launch_per_item<DdDropProbabilityKernel>(backend_, n, p);
   }
 
   // The probabilities of the last probabilities() call.
@@ -187,11 +186,6 @@ public:
   }
 
 private:
-  template <class Body, class Args>
-  void launch(std::size_t n, const Args& args) {
-    backend_.template launch<Body>(render::kernels::blocks_for(static_cast<long long>(n)),
-                                   render::kernels::kBlockThreads, args);
-  }
 
   Backend& backend_;
   std::size_t n_ = 0;

@@ -29,7 +29,7 @@ public:
     p.channels = channels;
     p.b = a_.data();
     p.planes = planes_.data();
-    launch<SsimReferencePlanesKernel>(n, p);
+    render::kernels::launch_per_item<SsimReferencePlanesKernel>(backend_, n, p);
     blur(planes_, 2 * n, width, height, blurred_);  // mu_b (C planes), s_bb (C planes)
     Ssim<float>::Reference ref;
     ref.width = width;
@@ -67,7 +67,7 @@ public:
     p.a = a_.data();
     p.b = b_.data();
     p.planes = planes_.data();
-    launch<SsimPlanesKernel>(n, p);
+    render::kernels::launch_per_item<SsimPlanesKernel>(backend_, n, p);
     blur(planes_, 3 * n, width, height, blurred_);
 
     // The map, its sum per block, its local derivatives; the partial sums added in a fixed order.
@@ -111,7 +111,7 @@ public:
       g.blurred_d_saa = blurred_.data() + values;
       g.blurred_d_sab = blurred_.data() + 2 * values;
       g.grad = grad_.data();
-      launch<SsimGradKernel>(n, g);
+      render::kernels::launch_per_item<SsimGradKernel>(backend_, n, g);
       std::vector<float> out;
       backend_.download(out, grad_, values);
       std::copy(out.begin(), out.end(), grad);
@@ -129,10 +129,6 @@ private:
     if (static_cast<long long>(width) * height * channels * 3 > (1LL << 31) - 1)
       fail("SSIM kernels: {}x{}x{} values exceed the int32 indices", width, height, channels);
   }
-  template <class Body, class Args>
-  void launch(int n, const Args& args) {
-    backend_.template launch<Body>(render::kernels::blocks_for(n), render::kernels::kBlockThreads, args);
-  }
   // The separable blur of `count` values (whole planes of width x height) in `in` into `out` (rows into
   // tmp_, then columns).
   void blur(Array<float>& in, int count, int width, int height, Array<float>& out) {
@@ -147,10 +143,10 @@ private:
     BlurArgs columns = rows;
     rows.in = in.data();
     rows.out = tmp_.data();
-    launch<BlurRowsKernel>(count, rows);
+    render::kernels::launch_per_item<BlurRowsKernel>(backend_, count, rows);
     columns.in = tmp_.data();
     columns.out = out.data();
-    launch<BlurColumnsKernel>(count, columns);
+    render::kernels::launch_per_item<BlurColumnsKernel>(backend_, count, columns);
   }
 
   Backend& backend_;
