@@ -94,7 +94,7 @@ Run add_eval_command(CLI::App& app) {
       if (cj.contains("init_is_oracle") && !cj["init_is_oracle"].is_boolean())
         fail("key 'init_is_oracle' must be true or false");
       oracle = cj.value("init_is_oracle", false);
-      update_from_json(c, cj, RecordedKeys::Ignore);
+      take_recorded_run_config(c, cj);  // an older run without image_source was trained on images_R/
     } catch (const Error& e) {
       fail_file(cfg_path, "{}", e.what());
     }

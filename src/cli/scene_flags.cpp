@@ -5,6 +5,7 @@ namespace d2gs::cli {
 SceneLoadOptions SceneFlags::load_options() const {
   SceneLoadOptions load;
   load.resolution = resolution;
+  load.image_source = image_source_from_string(image_source);
   load.background = glm::vec3(white_background ? 1.0f : 0.0f);
   return load;
 }
@@ -25,6 +26,11 @@ void add_scene_flags(CLI::App& cmd, SceneFlags& flags, SplitFlags split) {
   cmd.add_option("-s,--source", flags.source, "Scene folder (COLMAP sparse/0, LLFF poses_bounds.npy or Blender)")
       ->required();
   add_resolution_flag(cmd, flags.resolution);
+  cmd.add_option("--image-source", flags.image_source,
+                 "Images at -r R: 'largest' (the largest image folder resized with PIL's bicubic, as the original "
+                 "code and d2gs train do) or 'folder' (the prepared images_R/)")
+      ->check(CLI::IsMember({"largest", "folder"}))
+      ->capture_default_str();
   cmd.add_option("--n-views", flags.n_views, "Training views of the sparse-view split (0 = every non-test view)")
       ->capture_default_str();
   if (split == SplitFlags::All) {

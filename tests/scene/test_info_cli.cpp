@@ -30,11 +30,15 @@ json info_json(const std::string& args) {
 std::vector<int> ints(const json& j) { return j.get<std::vector<int>>(); }
 
 TEST(InfoCli, FernAcceptance) {
-  const auto j = info_json("-s " + q(test::fern_dir()) + " -r 8 --n-views 3");
+  const auto j = info_json("-s " + q(test::fern_dir()) + " -r 8 --n-views 3 --image-source folder");
   EXPECT_EQ(j["format"], "llff");
   EXPECT_EQ(j["root"], test::fern_dir().string());
   EXPECT_EQ(j["resolution"], 8);
   EXPECT_EQ(j["images_folder"], "images_8");
+  // By default, what d2gs train reads: the largest folder (images_4/ here), resized to the same size.
+  const auto d = info_json("-s " + q(test::fern_dir()) + " -r 8 --n-views 3");
+  EXPECT_EQ(d["images_folder"], "images_4");
+  EXPECT_EQ(d["cameras"][0]["width"], 504);
   ASSERT_EQ(j["cameras"].size(), 20u);
   for (std::size_t i = 0; i < 20; ++i) {
     const auto& c = j["cameras"][i];
@@ -88,7 +92,7 @@ TEST(InfoCli, ExplicitViewsAndTable) {
   const auto j = info_json("-s " + q(test::fern_dir()) + " -r 8 --train-views 2,5,11 --test-views 0,19");
   EXPECT_EQ(ints(j["train"]), (std::vector<int>{2, 5, 11}));
   EXPECT_EQ(ints(j["test"]), (std::vector<int>{0, 19}));
-  const auto r = test::run_cli("info -s " + q(test::fern_dir()) + " -r 8 --n-views 3");
+  const auto r = test::run_cli("info -s " + q(test::fern_dir()) + " -r 8 --n-views 3 --image-source folder");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(r.output.find("llff"), std::string::npos);
   EXPECT_NE(r.output.find("images_8"), std::string::npos);

@@ -188,6 +188,16 @@ TEST(Checkpoint, ResumeRules) {
   other.options["stereo_depth_lambda"] = 0.5;
   EXPECT_EQ(test::error_of([&] { (void)check_resume("c.bin", older, other, 100); }),
             "c.bin: cannot resume: it was trained with stereo_depth_lambda = (no such option), this run has 0.5");
+  // An option whose default changed after it was added: a checkpoint without it was trained at the former
+  // default (image_source: images_R/ until issue 23 made PIL's resize of the largest folder the default).
+  ASSERT_FALSE(older.run.options.contains("image_source"));
+  EXPECT_EQ(TrainConfig{}.image_source, ImageSource::Largest);
+  other = r;
+  other.options["image_source"] = "largest";  // today's default
+  EXPECT_EQ(test::error_of([&] { (void)check_resume("c.bin", older, other, 100); }),
+            "c.bin: cannot resume: it was trained with image_source = (no such option), this run has \"largest\"");
+  other.options["image_source"] = "folder";
+  EXPECT_EQ(check_resume("c.bin", older, other, 100), "");
 
   // --iterations.
   EXPECT_EQ(refused(r, 39), "c.bin: cannot resume: it is at iteration 40, beyond --iterations 39; resume with "

@@ -441,14 +441,15 @@ TEST(Trainer, RunFolderServesEvalAndImrCommands) {
   EXPECT_NE(bad.output.find("config.json"), std::string::npos) << bad.output;
 }
 
-// --image-source largest is recorded and eval scores against the source the run was trained on (or the one
-// asked for): the renders are the same, the ground truth is not.
+// The image source (PIL's resize of the largest folder by default) is recorded and eval scores against the
+// source the run was trained on (or the one asked for): the renders are the same, the ground truth is not.
+// A config.json without the key (a run from before the option) was trained on images_R/ and is scored so.
 TEST(Trainer, ImageSourceIsRecordedAndEvalScoresAgainstIt) {
   const auto dir = test::scratch_dir();
   const auto run = dir / "run";
   const auto r = test::run_cli(fmt::format(
       "-q train -s '{}' -m '{}' -r 8 --n-views 3 --iterations 4 --init random --random-points 2000 "
-      "--image-source largest --alpha-clamp-grad pass-through",
+      "--alpha-clamp-grad pass-through",
       (test::shared_data() / "nerf_llff_data/fern").string(), run.string()));
   ASSERT_EQ(r.exit_code, 0) << r.output;
   const auto cfg = nlohmann::json::parse(read_file(run / "config.json"));
@@ -471,6 +472,14 @@ TEST(Trainer, ImageSourceIsRecordedAndEvalScoresAgainstIt) {
   EXPECT_NEAR(other["mean"]["PSNR"].get<double>(), trained["mean"]["PSNR"].get<double>(), 1.0);
   const auto bad = test::run_cli(fmt::format("-q eval -m '{}' --image-source pil", run.string()));
   EXPECT_NE(bad.exit_code, 0);
+  auto older = cfg;
+  older.erase("image_source");
+  write_file_atomic(run / "config.json", older.dump(2));
+  const auto o = test::run_cli(fmt::format("-q eval -m '{}' --json", run.string()));
+  ASSERT_EQ(o.exit_code, 0) << o.output;
+  const auto as_before = nlohmann::json::parse(read_file(run / "results.json"));
+  EXPECT_EQ(as_before["image_source"], "folder");
+  EXPECT_EQ(as_before["mean"]["PSNR"].get<double>(), other["mean"]["PSNR"].get<double>());
 }
 
 TEST(TrainConfig, JsonRoundTripAndUnknownKeys) {
@@ -478,7 +487,7 @@ TEST(TrainConfig, JsonRoundTripAndUnknownKeys) {
   c.source = "s";
   c.model_dir = "m";
   c.method = "d2gs";
-  c.image_source = ImageSource::Largest;  // not the default
+  c.image_source = ImageSource::Folder;    // not the default
   c.alpha_clamp_pass_through = true;       // not the default
   c.dd_drop.weight_depth = 0.7;
   c.dafe.loss_form = DafeLossForm::Paper;  // not the default

@@ -450,10 +450,10 @@ std::string check_resume(const fs::path& source, const Checkpoint& checkpoint, c
     const bool in_was = was_options.contains(key), in_run = run_options.contains(key);
     if (in_was && in_run && was_options.at(key) == run_options.at(key)) continue;
     if (!in_was && !in_run) continue;
-    // An option newer than the checkpoint: its default is what the code did before the option existed
-    // (every option is added that way), so the run may go on at the default and at nothing else.
+    // An option newer than the checkpoint: what the code did before the option existed (its default when
+    // it was added, options.hpp's value_when_absent), so the run may go on at that value and at nothing else.
     if (!in_was && in_run)
-      if (const TrainOption* o = find_train_option(key); o && run_options.at(key) == o->get(TrainConfig{})) continue;
+      if (const TrainOption* o = find_train_option(key); o && run_options.at(key) == value_when_absent(*o)) continue;
     refuse("it was trained with {} = {}, this run has {}", key, in_was ? was_options.at(key).dump() : "(no such option)",
            in_run ? run_options.at(key).dump() : "(no such option)");
   }

@@ -28,9 +28,10 @@ struct TrainConfig {
   int n_views = 0;                    // 0 = every non-test view
   std::vector<int> train_views, test_views;
   bool white_background = false;
-  // Training and test images: the prepared images_R/ folder, or the largest folder resized with PIL's
-  // bicubic as the original code does (scene.hpp, ImageSource). Eval scores against the same source.
-  ImageSource image_source = ImageSource::Folder;
+  // Training and test images: the largest folder resized with PIL's bicubic as the original code does
+  // (the default, issue 23), or the prepared images_R/ folder (scene.hpp, ImageSource). Eval scores against
+  // the same source; a config.json without the key (runs from before the option) means Folder.
+  ImageSource image_source = kDefaultImageSource;
 
   // method
   std::string method = "3dgs";  // a name of train/methods/registry.cpp: 3dgs, dropgaussian, d2gs
@@ -125,6 +126,10 @@ void to_json(nlohmann::json& j, const TrainConfig& c);
 // the command line. With `recorded` = Ignore, the keys of kRecordedKeys are skipped (a saved config.json).
 enum class RecordedKeys { Refuse, Ignore };
 void update_from_json(TrainConfig& c, const nlohmann::json& j, RecordedKeys recorded = RecordedKeys::Refuse);
+
+// A run's recorded config.json `recorded`, read into `c`: the options it lacks take the value the run
+// was trained with (options.hpp, value_when_absent: a default changed since is not what it used).
+void take_recorded_run_config(TrainConfig& c, const nlohmann::json& recorded);
 
 // The scene folder recorded in a run's config.json. d2gs train records it absolute; a relative one (an
 // older run, a hand-written file) is taken relative to the run folder `model_dir` when that exists there,

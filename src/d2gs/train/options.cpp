@@ -319,11 +319,12 @@ std::vector<TrainOption> declare() {
   t.push_back(flag({"white_background", scene, "White background (Blender scenes)"},
                    [](auto& c) -> auto& { return c.white_background; }));
   t.push_back(choice({"image_source", scene,
-                      "Images at -r R: 'folder' (images_R/, else a larger folder area-resampled) or 'largest' (the "
-                      "largest image folder, resized with PIL's bicubic as the original code does; training and "
-                      "ground truth)"},
+                      "Images at -r R: 'largest' (default: the largest image folder, resized with PIL's bicubic as "
+                      "the original code does; training and ground truth, so that PSNR is measured on the papers' "
+                      "pixels) or 'folder' (the prepared images_R/, else a larger folder area-resampled)"},
                      [](auto& c) -> auto& { return c.image_source; },
                      {{"folder", ImageSource::Folder}, {"largest", ImageSource::Largest}}));
+  t.back().absent_means = "folder";  // the default until issue 23 (2026-11-27)
   // ---- method ----
   {
     // The methods of the registry (train/methods/registry.cpp), each with its help.
@@ -368,6 +369,7 @@ std::vector<TrainOption> declare() {
                       "mid-air points seen through to another colour (0: off; SGBM ignores it; as `d2gs init "
                       "--fusion-max-color-difference`; docs/training.md)"},
                      [](auto& c) -> auto& { return c.init_color_filter; }, closed(0.0, 1.0)));
+  t.back().absent_means = 0.0;  // added off (2ce5087), on by default since 6ffbd09
   t.push_back(number({"random_points", init,
                       "Point count of --init random (random pixel rays of the training views, uniform inverse depth "
                       "within the scene's depth bounds: docs/training.md)"},
@@ -568,6 +570,8 @@ const TrainOption* find_train_option(std::string_view name) {
   }
   return nullptr;
 }
+
+json value_when_absent(const TrainOption& o) { return o.absent_means.is_null() ? o.get(TrainConfig{}) : o.absent_means; }
 
 json with_current_names(const json& options) {
   json out = json::object();

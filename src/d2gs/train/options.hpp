@@ -59,6 +59,9 @@ struct TrainOption {
   std::function<nlohmann::json(const std::vector<std::string>&)> parse;
   // The default as --help shows it.
   std::function<std::string()> default_text;
+  // Where the default has changed since the option was added: the value a config.json or a checkpoint
+  // without this key was trained with (null: the default, which is how every option is added).
+  nlohmann::json absent_means;
 
   std::string flag() const;  // "--" + name with '-' for '_'
 };
@@ -73,5 +76,7 @@ const TrainOption* find_train_option(std::string_view name);
 // `options` (config.json keys) with every former name replaced by the option's name; an entry of a
 // name that is no option is kept as it is.
 nlohmann::json with_current_names(const nlohmann::json& options);
+// The value a run recorded without the option's key was trained with: absent_means, else the default.
+nlohmann::json value_when_absent(const TrainOption& o);
 
 }  // namespace d2gs
