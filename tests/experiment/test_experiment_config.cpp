@@ -103,6 +103,33 @@ TEST(ExperimentConfig, AblationExampleMirrorsThePaperTable) {
   EXPECT_EQ(find(runs, "3dgs-baseline", 0).dir, fs::path("runs/fern/3v/3dgs-baseline/seed0"));
 }
 
+// A scene's own "train" keys (fern at -r 8, room and horns at -r 2 in one table): over the experiment's
+// "train", under a method's "options".
+TEST(ExperimentConfig, SceneTrainKeysApplyToThatScenesRunsOnly) {
+  const auto file = test::source_dir() / "configs/experiments/llff_levers.json";
+  const ExperimentConfig c = load_experiment_config(file, test::shared_data().string());
+  const auto runs = expand_runs(c, out_dir("levers"));
+  ASSERT_EQ(runs.size(), 3u * 8u * 3u);
+  for (const auto& r : runs) {
+    EXPECT_EQ(r.train_config["resolution"], r.scene == "fern" ? 8 : 2) << r.id();
+    EXPECT_EQ(r.train_config["iterations"], 10000) << r.id();  // the experiment's "train"
+    EXPECT_EQ(r.train_config["image_source"], "largest") << r.id();  // today's default
+  }
+  const auto dir = test::scratch_dir();
+  write_file_atomic(dir / "scene_train.json", R"({"scenes": [
+      {"name": "a", "source": "/data/a", "train": {"resolution": 2, "iterations": 50}},
+      {"name": "b", "source": "/data/b"}],
+    "views": [3], "train": {"iterations": 100},
+    "methods": [{"method": "3dgs"}, {"method": "3dgs", "variant": "short", "options": {"iterations": 20}}]})");
+  const auto mixed = expand_runs(load_experiment_config(dir / "scene_train.json"), out_dir("mixed"));
+  ASSERT_EQ(mixed.size(), 4u);
+  EXPECT_EQ(mixed[0].train_config["iterations"], 50);   // a: the scene's over the experiment's
+  EXPECT_EQ(mixed[0].train_config["resolution"], 2);
+  EXPECT_EQ(mixed[1].train_config["iterations"], 20);   // a, short: the method's over the scene's
+  EXPECT_EQ(mixed[2].train_config["iterations"], 100);  // b: the experiment's
+  EXPECT_EQ(mixed[2].train_config["resolution"], 1);
+}
+
 void expect_error(const std::string& text, const std::string& message) {
   const auto dir = test::scratch_dir();
   write_file_atomic(dir / "bad.json", text);
@@ -133,6 +160,12 @@ TEST(ExperimentConfig, BadFilesAreOneLineErrorsNamingTheFile) {
   expect_error(R"({"scenes": [{"name": "a b", "source": "x"}], "views": [3], "methods": [{"method": "3dgs"}]})",
                "scene name 'a b'");
   expect_error("{" + scenes + R"(, "seeds": [1, 1], "methods": [{"method": "3dgs"}]})", "'seeds' repeats");
+  expect_error(R"({"scenes": [{"name": "a", "source": "x", "train": {"seed": 2}}], "views": [3],
+                  "methods": [{"method": "3dgs"}]})",
+               "scene a's 'train' sets 'seed', which the experiment sets");
+  expect_error(R"({"scenes": [{"name": "a", "source": "x", "train": {"resolutoin": 2}}], "views": [3],
+                  "methods": [{"method": "3dgs"}]})",
+               "unknown key 'resolutoin'");
 }
 
 // Numbers used to go through get<int>(): "views": [4294967299] became 3 views, 5.7 became 5.

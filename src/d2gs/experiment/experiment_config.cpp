@@ -116,7 +116,7 @@ ExperimentConfig parse_experiment_config(const nlohmann::json& j, const fs::path
   std::set<std::string> names;
   for (const auto& s : j["scenes"]) {
     if (!s.is_object()) fail_file(file, "each scene is an object with name and source");
-    check_keys(s, {"name", "source", "scene_preset"}, file, "a scene");
+    check_keys(s, {"name", "source", "scene_preset", "train"}, file, "a scene");
     SceneSpec spec;
     spec.source = get<std::string>(s, "source", "", file, "a scene");
     if (spec.source.empty()) fail_file(file, "a scene has no 'source'");
@@ -124,6 +124,8 @@ ExperimentConfig parse_experiment_config(const nlohmann::json& j, const fs::path
     if (!safe_name(spec.name)) fail_file(file, "scene name '{}' must be letters, digits, '.', '_' or '-'", spec.name);
     if (!names.insert(spec.name).second) fail_file(file, "scene name '{}' appears twice", spec.name);
     spec.scene_preset = get<std::string>(s, "scene_preset", "", file, "scene " + spec.name);
+    spec.train = s.value("train", nlohmann::json::object());
+    check_train_keys(spec.train, file, fmt::format("scene {}'s 'train'", spec.name));
     fs::path src = spec.source;
     if (src.is_relative() && !c.data_root.empty()) src = fs::path(c.data_root) / src;
     spec.source = fs::absolute(src).lexically_normal().string();
@@ -214,6 +216,7 @@ std::vector<RunSpec> expand_runs(const ExperimentConfig& config, const fs::path&
           TrainConfig c;
           try {
             update_from_json(c, config.train);
+            update_from_json(c, scene.train);
             if (!m.preset.empty()) {
               apply_d2gs_preset(c, m.preset);
               c.preset = m.preset;

@@ -29,6 +29,9 @@ struct SceneSpec {
   std::string name;    // folder name and table label
   std::string source;  // resolved path of the scene
   std::string scene_preset;  // D²GS per-scene values used by methods with "scene_preset": true
+  // d2gs train config keys for this scene's runs (e.g. its resolution), over the experiment's "train" and
+  // under a method's "options".
+  nlohmann::json train = nlohmann::json::object();
 };
 
 struct MethodSpec {
