@@ -319,7 +319,7 @@ std::vector<TrainOption> declare() {
   t.push_back(flag({"white_background", scene, "White background (Blender scenes)"},
                    [](auto& c) -> auto& { return c.white_background; }));
   t.push_back(choice({"image_source", scene,
-                      "Images at -r R: 'largest' (default: the largest image folder, resized with PIL's bicubic as "
+                      "Images at -r R: 'largest' (the largest image folder, resized with PIL's bicubic as "
                       "the original code does; training and ground truth, so that PSNR is measured on the papers' "
                       "pixels) or 'folder' (the prepared images_R/, else a larger folder area-resampled)"},
                      [](auto& c) -> auto& { return c.image_source; },
