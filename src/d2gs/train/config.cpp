@@ -59,12 +59,9 @@ SplitOptions split_options(const TrainConfig& c) {
 
 void take_recorded_run_config(TrainConfig& c, const nlohmann::json& recorded) {
   update_from_json(c, recorded, RecordedKeys::Ignore);
-  for (const TrainOption& o : train_options()) {
-    if (o.absent_means.is_null()) continue;
-    bool present = recorded.contains(o.name);
-    for (const auto& alias : o.aliases) present = present || recorded.contains(alias);
-    if (!present) o.set(c, o.absent_means);
-  }
+  const nlohmann::json current = with_current_names(recorded);  // former names counted as present
+  for (const TrainOption& o : train_options())
+    if (!o.absent_means.is_null() && !current.contains(o.name)) o.set(c, o.absent_means);
 }
 
 std::filesystem::path recorded_source(const std::filesystem::path& model_dir, const std::string& source) {

@@ -186,7 +186,6 @@ public:
   }
 
 private:
-
   Backend& backend_;
   std::size_t n_ = 0;
   typename Backend::template Array<float> means_, density_, depth_, probabilities_;
