@@ -14,6 +14,7 @@
 #include "d2gs/render/cpu/composite_tiles.hpp"
 #include "d2gs/render/cpu/projection.hpp"
 #include "d2gs/render/cpu/sh.hpp"
+#include "d2gs/model/gaussians.hpp"
 #include "d2gs/render/kernels/stages.hpp"
 #include "render/render_test_util.hpp"
 
@@ -61,6 +62,21 @@ inline Diff diff(const float* a, const float* b, std::size_t n) {
     d.max_abs = std::max(d.max_abs, std::isnan(e) ? INFINITY : e);
   }
   return d;
+}
+
+// Whether two float arrays hold the same bits.
+inline bool bit_equal(const std::vector<float>& a, const std::vector<float>& b) {
+  return a.size() == b.size() && (a.empty() || std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0);
+}
+// Every array of two models (or of two Adam moments) bit for bit.
+inline void expect_bit_equal(const Gaussians& a, const Gaussians& b, const std::string& what) {
+  EXPECT_EQ(a.size(), b.size()) << what;
+  EXPECT_TRUE(bit_equal(a.means, b.means)) << what << " means";
+  EXPECT_TRUE(bit_equal(a.log_scales, b.log_scales)) << what << " log_scales";
+  EXPECT_TRUE(bit_equal(a.quats, b.quats)) << what << " quats";
+  EXPECT_TRUE(bit_equal(a.opacity_logits, b.opacity_logits)) << what << " opacity_logits";
+  EXPECT_TRUE(bit_equal(a.sh_dc, b.sh_dc)) << what << " sh_dc";
+  EXPECT_TRUE(bit_equal(a.sh_rest, b.sh_rest)) << what << " sh_rest";
 }
 
 // Whether the CPU tile loops in use fuse their multiply-adds (x86-64-v3 and above do; the SSE2 baseline does not).

@@ -8,6 +8,7 @@
 #include <cstring>
 #include <random>
 
+#include "cuda/stage_compare.hpp"
 #include "d2gs/core/error.hpp"
 #include "d2gs/render/cuda/device.hpp"
 #include "d2gs/train/adam.hpp"
@@ -25,19 +26,6 @@ Gaussians random_gaussians(std::size_t n, unsigned seed, float scale) {
   for (auto* a : {&g.means, &g.log_scales, &g.quats, &g.opacity_logits, &g.sh_dc, &g.sh_rest})
     for (auto& v : *a) v = d(rng);
   return g;
-}
-
-bool bit_equal(const std::vector<float>& a, const std::vector<float>& b) {
-  return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(float)) == 0;
-}
-
-void expect_bit_equal(const Gaussians& a, const Gaussians& b, const char* what) {
-  EXPECT_TRUE(bit_equal(a.means, b.means)) << what << " means";
-  EXPECT_TRUE(bit_equal(a.log_scales, b.log_scales)) << what << " log_scales";
-  EXPECT_TRUE(bit_equal(a.quats, b.quats)) << what << " quats";
-  EXPECT_TRUE(bit_equal(a.opacity_logits, b.opacity_logits)) << what << " opacity_logits";
-  EXPECT_TRUE(bit_equal(a.sh_dc, b.sh_dc)) << what << " sh_dc";
-  EXPECT_TRUE(bit_equal(a.sh_rest, b.sh_rest)) << what << " sh_rest";
 }
 
 namespace emulate = render::kernels::emulate;

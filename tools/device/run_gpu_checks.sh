@@ -15,7 +15,7 @@ chmod +x $P/bin/*
 cd $P/bin
 ldd ./test_cuda | grep -i "not found"
 echo "== GPU tests"
-timeout ${T1:-240} ./test_cuda --gtest_filter='CudaDevice.*:Device*.*' 2>&1 | tee $OUT/test_cuda.log | grep -v "^\[ *RUN\|^\[ *OK" | tail -120
+timeout ${T1:-240} ./test_cuda --gtest_filter='CudaDevice.*:Device*.*:ResidentStep.Device*' 2>&1 | tee $OUT/test_cuda.log | grep -v "^\[ *RUN\|^\[ *OK" | tail -120
 if [ "${BENCH:-1}" = 1 ]; then
 echo "== bench"
 timeout ${T2:-150} ./bench_cuda --benchmark_min_time=1 --benchmark_repetitions=3 --benchmark_report_aggregates_only=false --benchmark_format=console 2>&1 | tee $OUT/bench_cuda.log | tail -30

@@ -1,5 +1,6 @@
 #pragma once
-// The per-value arithmetic of the photometric losses (train/losses.cpp: l1_loss, dafe_loss), shared
+// The per-value arithmetic of the photometric losses (train/losses.cpp: l1_loss, dafe_loss) and of the
+// render's clamp before them (the trainer), shared
 // unchanged by the CPU and the CUDA backend's kernels (train/kernels/l1_kernels.hpp, dafe_kernels.hpp).
 // C++17, no standard library: nvcc compiles it.
 #include <math.h>
@@ -7,6 +8,11 @@
 #include "d2gs/core/host_device.hpp"
 
 namespace d2gs {
+
+// The losses see the render clamped to [0, 1] (std::clamp's order of tests: NaN stays NaN), and no
+// gradient reaches a value the clamp changed.
+D2GS_HD float clamp_unit(float v) { return v < 0.0f ? 0.0f : 1.0f < v ? 1.0f : v; }
+D2GS_HD bool clamp_blocks_gradient(float v) { return v < 0.0f || v > 1.0f; }
 
 // |x|' with 0 at 0, as torch's sign.
 D2GS_HD float loss_sign(float x) { return x > 0.0f ? 1.0f : x < 0.0f ? -1.0f : 0.0f; }

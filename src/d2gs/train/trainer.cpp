@@ -24,10 +24,13 @@
 #include "d2gs/model/ply.hpp"
 #include "d2gs/render/activations.hpp"
 #include "d2gs/render/device_choice.hpp"
+#include "d2gs/render/raster_math.hpp"
 #include "d2gs/render/rasterizer.hpp"
 #include "d2gs/train/checkpoint.hpp"
 #include "d2gs/train/densify.hpp"
 #include "d2gs/train/initialize.hpp"
+#include "d2gs/train/kernels/device_step.hpp"
+#include "d2gs/train/loss_math.hpp"
 #include "d2gs/train/losses.hpp"
 #include "d2gs/train/methods/method.hpp"
 #include "d2gs/train/outputs.hpp"
@@ -65,8 +68,12 @@ struct Trainer::State {
   Gaussians model;
   AdamState adam;
   GradientStats stats;
-  render::DeviceChoice device;                // what --device chose (the CPU until the CUDA step exists)
+  render::DeviceChoice device;                // what --device chose
   std::unique_ptr<render::Rasterizer> rasterizer;
+  // The device-resident step (--device cuda|emulated and a method that runs_on_device()), null otherwise;
+  // while host_stale, the device holds a newer model, moments and statistic than model, adam, stats.
+  std::unique_ptr<train_kernels::DeviceStep> resident;
+  bool host_stale = false;
   Ssim<float> ssim;
   std::vector<Ssim<float>::Reference> ssim_refs;  // by position in split.train: the images' local statistics
   int iteration = 0;
@@ -86,6 +93,19 @@ struct Trainer::State {
 
   double elapsed() const { return elapsed_before + std::chrono::duration<double>(Clock::now() - started).count(); }
   fs::path out() const { return cfg.model_dir; }
+
+  // The host's copy of the model, moments and statistic brought up to date from the device.
+  void sync_host() {
+    if (!resident || !host_stale) return;
+    resident->download(model, adam, stats);
+    host_stale = false;
+  }
+  // The host's copy (edited there) back onto the device.
+  void sync_device() {
+    if (!resident) return;
+    resident->upload(model, adam, stats);
+    host_stale = false;
+  }
 };
 
 namespace {
@@ -278,8 +298,17 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
   } else {
     write_point_cloud_ply(s.out() / "input.ply", init);
   }
+  if (s.device.device != render::Device::Cpu && s.method->runs_on_device()) {
+    s.resident = s.device.device == render::Device::Cuda ? train_kernels::make_device_step()
+                                                          : train_kernels::make_emulated_step();
+    s.resident->set_training_views(s.train_images, s.ssim_refs);
+    s.sync_device();
+  }
   if (!s.device.reason.empty()) spdlog::info("--device auto: using the {}: {}", s.device.description, s.device.reason);
-  if (s.device.device != render::Device::Cpu) spdlog::info("device: {}", s.device.description);
+  if (s.device.device != render::Device::Cpu)
+    spdlog::info("device: {}; {}", s.device.description,
+                 s.resident ? "the whole training step on it"
+                            : fmt::format("the rasterizer on it, --method {}'s hooks on the CPU", s.cfg.method));
   write_run_config(s.out(), s.cfg, s.scene, s.split, s.extent, s.oracle_init, s.device.device);
   write_cameras_json(s.out(), s.scene, s.split);
   s.log.open(s.out() / "train_log.jsonl", s.iteration > 0 ? std::ios::app : std::ios::trunc);
@@ -290,32 +319,74 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
 Trainer::~Trainer() = default;
 
 int Trainer::iteration() const { return s_->iteration; }
-const Gaussians& Trainer::model() const { return s_->model; }
+const Gaussians& Trainer::model() const {
+  s_->sync_host();
+  return s_->model;
+}
 const Scene& Trainer::scene() const { return s_->scene; }
 const Split& Trainer::split() const { return s_->split; }
 const TrainConfig& Trainer::config() const { return s_->cfg; }
 float Trainer::scene_extent() const { return s_->extent; }
 bool Trainer::init_is_oracle() const { return s_->oracle_init; }
 
-IterationRecord Trainer::step() {
-  auto& s = *s_;
-  const auto& cfg = s.cfg;
-  const profile::Scope profile_step("step");
-  const int t = ++s.iteration;
-  IterationRecord rec;
-  rec.iteration = t;
+namespace {
 
-  const float means_lr = static_cast<float>(
+// The start of an iteration, on either path: its number t, its learning rate of the means, the SH degree, the
+// camera (its position in split.train, from a random permutation of the training views per epoch).
+struct IterationStart {
+  int t = 0;
+  float means_lr = 0.0f;
+  int view = 0;
+};
+
+IterationStart start_iteration(Trainer::State& s) {
+  const auto& cfg = s.cfg;
+  IterationStart i;
+  const int t = i.t = ++s.iteration;
+  i.means_lr = static_cast<float>(
       position_lr(cfg.lr.means * s.extent, cfg.position_lr_final * s.extent, t, cfg.iterations));
   if (t % cfg.sh_increase_every == 0) s.active_sh = std::min(s.active_sh + 1, cfg.sh_degree);
-
   if (s.camera_stack.empty()) {
     s.camera_stack.resize(s.split.train.size());
     for (std::size_t k = 0; k < s.camera_stack.size(); ++k) s.camera_stack[k] = static_cast<int>(k);
   }
   const std::size_t pick = s.rng_cameras.below(s.camera_stack.size());
-  const int view = s.camera_stack[pick];
+  i.view = s.camera_stack[pick];
   s.camera_stack.erase(s.camera_stack.begin() + static_cast<std::ptrdiff_t>(pick));
+  return i;
+}
+
+// The log line of an iteration (every log_every and the last).
+void log_iteration(Trainer::State& s, const IterationRecord& rec) {
+  const int t = rec.iteration;
+  if (t % s.cfg.log_every != 0 && t != s.cfg.iterations) return;
+  nlohmann::json line = {{"iteration", t}, {"loss", rec.loss}, {"l1", rec.l1}, {"ssim", rec.ssim}};
+  for (const LossTerm& term : rec.terms) line[term.name] = term.value;  // the method's terms (D²GS: dafe)
+  line["drop_fraction"] = rec.drop_fraction;
+  line["gaussians"] = rec.gaussians;
+  line["elapsed_s"] = rec.elapsed_s;
+  s.log << line.dump() << '\n';
+  s.log.flush();
+}
+
+void log_densify(Trainer::State& s, int t, const DensifyReport& report) {
+  s.log << nlohmann::json{{"event", "densify"}, {"iteration", t}, {"cloned", report.cloned}, {"split", report.split},
+                          {"pruned", report.pruned}, {"gaussians", report.after}}.dump() << '\n';
+}
+
+}  // namespace
+
+IterationRecord Trainer::step() {
+  auto& s = *s_;
+  if (s.resident) return device_step();
+  const auto& cfg = s.cfg;
+  const profile::Scope profile_step("step");
+  const IterationStart start = start_iteration(s);
+  const int t = start.t;
+  IterationRecord rec;
+  rec.iteration = t;
+  const float means_lr = start.means_lr;
+  const int view = start.view;
   const Image& gt = s.train_images[static_cast<std::size_t>(view)];
 
   // The method's hooks before the render: its preparations, then this iteration's opacity multiplier.
@@ -346,7 +417,7 @@ IterationRecord Trainer::step() {
     float* pred = s.pred.data();
     const float* rgb = out.rgb.data();
 #pragma omp parallel for schedule(static)
-    for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(values); ++i) pred[i] = std::clamp(rgb[i], 0.0f, 1.0f);
+    for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(values); ++i) pred[i] = clamp_unit(rgb[i]);
     rec.l1 = l1_loss(s.pred.data(), gt.pixels.data(), values, s.grad_rgb.data(), 1.0f);
   }
   const Ssim<float>::Reference& gt_stats = s.ssim_refs[static_cast<std::size_t>(view)];
@@ -379,7 +450,7 @@ IterationRecord Trainer::step() {
     const float* rgb = out.rgb.data();
 #pragma omp parallel for schedule(static)
     for (std::ptrdiff_t i = 0; i < static_cast<std::ptrdiff_t>(values); ++i)
-      if (rgb[i] < 0.0f || rgb[i] > 1.0f) grad[i] = 0.0f;  // clamp: no gradient outside [0, 1]
+      if (clamp_blocks_gradient(rgb[i])) grad[i] = 0.0f;  // clamp: no gradient outside [0, 1]
   }
   if (!std::isfinite(rec.loss)) fail("iteration {}: the loss is not finite ({}); stopping", t, rec.loss);
 
@@ -424,8 +495,7 @@ IterationRecord Trainer::step() {
       const auto report = densify_and_prune(s.model, s.adam, s.stats, s.extent, cfg.densify, s.rng_densify);
       s.method->after_densify(report);
       skip_step = true;  // the new tensors carry no gradient this iteration
-      s.log << nlohmann::json{{"event", "densify"}, {"iteration", t}, {"cloned", report.cloned}, {"split", report.split},
-                              {"pruned", report.pruned}, {"gaussians", report.after}}.dump() << '\n';
+      log_densify(s, t, report);
     }
     if (std::find(cfg.opacity_reset_at.begin(), cfg.opacity_reset_at.end(), t) != cfg.opacity_reset_at.end()) {
       reset_opacity(s.model, s.adam);
@@ -443,19 +513,85 @@ IterationRecord Trainer::step() {
 
   rec.gaussians = s.model.size();
   rec.elapsed_s = s.elapsed();
-  if (t % cfg.log_every == 0 || t == cfg.iterations) {
-    nlohmann::json line = {{"iteration", t}, {"loss", rec.loss}, {"l1", rec.l1}, {"ssim", rec.ssim}};
-    for (const LossTerm& term : rec.terms) line[term.name] = term.value;  // the method's terms (D²GS: dafe)
-    line["drop_fraction"] = rec.drop_fraction;
-    line["gaussians"] = rec.gaussians;
-    line["elapsed_s"] = rec.elapsed_s;
-    s.log << line.dump() << '\n';
-    s.log.flush();
+  log_iteration(s, rec);
+  return rec;
+}
+
+// step() with the model on the device: the same order, the method's hooks replaced by what its
+// device_multiplier() asks for (TrainingMethod::runs_on_device), the model brought to the host only where
+// the host needs it.
+IterationRecord Trainer::device_step() {
+  auto& s = *s_;
+  const auto& cfg = s.cfg;
+  const profile::Scope profile_step("step");
+  const IterationStart start = start_iteration(s);
+  const int t = start.t;
+  IterationRecord rec;
+  rec.iteration = t;
+
+  train_kernels::ResidentRender r;
+  r.camera = s.train_cameras[static_cast<std::size_t>(start.view)];
+  r.stages.active_degree = std::min(s.active_sh, cfg.sh_degree);
+  r.stages.alpha_min = render::kAlphaMin;
+  for (int c = 0; c < 3; ++c) r.composite.background[c] = s.scene.background[c];
+  r.composite.clamp_pass_through = cfg.alpha_clamp_pass_through;
+  r.composite.fused_multiply_add = true;  // as render::make_rasterizer's kernel rasterizer
+  const DeviceMultiplier multiplier = s.method->device_multiplier(t);
+  r.dropgaussian = multiplier.dropgaussian;
+  r.drop_rate = multiplier.rate;
+  {
+    const profile::Scope p("device: render, losses, backward");
+    const train_kernels::ResidentLoss loss =
+        s.resident->render_and_backward(static_cast<std::size_t>(start.view), r, s.rng_dropout, cfg.lambda_dssim);
+    s.host_stale = true;
+    rec.l1 = loss.l1;
+    rec.ssim = static_cast<float>(loss.ssim);  // as the CPU's Ssim::evaluate returns it
+    rec.drop_fraction = loss.drop_fraction;
   }
+  rec.loss = rec.l1 + cfg.lambda_dssim * (1.0 - rec.ssim);
+  if (!std::isfinite(rec.loss)) fail("iteration {}: the loss is not finite ({}); stopping", t, rec.loss);
+  if (!s.resident->gradients_finite()) fail("iteration {}: non-finite gradient; stopping", t);
+
+  if (s.outputs) {
+    const profile::Scope p("outputs: saves and tests");
+    const profile::Paused inside;
+    save_and_test(t);
+  }
+
+  bool skip_step = false, skip_opacity = false;
+  if (t < cfg.densify_until && t < cfg.iterations) {
+    s.resident->add_gradient_stats();
+    if (t > cfg.densify_from && t % cfg.densify_every == 0) {
+      const profile::Scope p("densify: edits (on the host)");
+      s.sync_host();
+      const auto report = densify_and_prune(s.model, s.adam, s.stats, s.extent, cfg.densify, s.rng_densify);
+      s.method->after_densify(report);
+      s.sync_device();
+      skip_step = true;
+      log_densify(s, t, report);
+    }
+    if (std::find(cfg.opacity_reset_at.begin(), cfg.opacity_reset_at.end(), t) != cfg.opacity_reset_at.end()) {
+      s.sync_host();
+      reset_opacity(s.model, s.adam);
+      s.sync_device();
+      skip_opacity = true;
+    }
+  }
+  if (t < cfg.iterations && !skip_step) {
+    const profile::Scope p("Adam");
+    s.resident->adam(cfg.lr, start.means_lr, skip_opacity);
+    s.host_stale = true;
+  }
+  if (!s.resident->parameters_finite()) fail("iteration {}: a model parameter became non-finite; stopping", t);
+
+  rec.gaussians = s.resident->size();
+  rec.elapsed_s = s.elapsed();
+  log_iteration(s, rec);
   return rec;
 }
 
 void Trainer::save_checkpoint(const fs::path& path) const {
+  s_->sync_host();
   const auto& s = *s_;
   TrainingState t;
   t.iteration = s.iteration;
@@ -477,6 +613,7 @@ void Trainer::save_checkpoint(const fs::path& path) const {
 }
 
 EvalSummary Trainer::evaluate_test_views(const fs::path& render_dir) const {
+  s_->sync_host();
   EvalOptions eo;
   eo.render_dir = render_dir;
   return evaluate_views(s_->model, s_->scene, s_->split.test, eo);
@@ -488,10 +625,12 @@ void Trainer::save_and_test(int t) {
   auto& s = *s_;
   const auto& cfg = s.cfg;
   const auto listed = [t](const std::vector<int>& at) { return std::find(at.begin(), at.end(), t) != at.end(); };
-  if (cfg.save_iterations.empty() ? t == cfg.iterations : listed(cfg.save_iterations))
-    write_gaussians_ply(s.out() / "point_cloud" / fmt::format("iteration_{}", t) / "point_cloud.ply", s.model);
+  const bool saves = cfg.save_iterations.empty() ? t == cfg.iterations : listed(cfg.save_iterations);
   // A --stop-at iteration is scored too, so that a stopped run says where it stands.
-  if (listed(cfg.test_iterations) || (t == cfg.stop_at && t < cfg.iterations)) {
+  const bool tests = listed(cfg.test_iterations) || (t == cfg.stop_at && t < cfg.iterations);
+  if (saves || tests) s.sync_host();
+  if (saves) write_gaussians_ply(s.out() / "point_cloud" / fmt::format("iteration_{}", t) / "point_cloud.ply", s.model);
+  if (tests) {
     const auto e = evaluate_test_views();
     s.log << nlohmann::json{{"event", "test"}, {"iteration", t}, {"psnr", e.psnr}, {"ssim", e.ssim}}.dump() << '\n';
     s.log.flush();
@@ -517,6 +656,7 @@ void Trainer::run() {
     progress.update(t, rec.loss, rec.gaussians, s.elapsed());
   }
   s.outputs = false;
+  s.sync_host();
   progress.finish();
   if (profile::enabled()) {
     const std::string table = profile::format_table(profile::totals(), "step");

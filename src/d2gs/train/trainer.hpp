@@ -4,7 +4,11 @@
 // the method's opacity multiplier (dropout), render, loss (L1 + λ·D-SSIM + the method's terms, e.g. DAFE)
 // on the clamped image, backward, densification statistics and edits, opacity reset, Adam step. What
 // differs between methods sits behind train/methods/method.hpp; the loop never asks which method it
-// runs. Outputs in the layout of the original code.
+// runs. Outputs in the layout of the original code. With --device cuda|emulated and a method whose hooks
+// the device can stand in for (TrainingMethod::runs_on_device), the whole step runs on the device
+// (train/kernels/device_step.hpp), the model coming to the host only for saves, tests, densification,
+// the opacity reset and checkpoints; other methods keep their hooks on the host with the rasterizer on the
+// device.
 #include <filesystem>
 #include <functional>
 #include <memory>
@@ -59,6 +63,7 @@ public:
 
 private:
   void save_and_test(int iteration);  // run()'s outputs at `iteration`, called from step()
+  IterationRecord device_step();      // step() with the device-resident step (--device cuda|emulated)
 
   std::unique_ptr<State> s_;
 };

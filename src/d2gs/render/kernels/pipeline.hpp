@@ -85,7 +85,6 @@ public:
     if (n_ > static_cast<std::size_t>(1) << 30) fail("stages: {} Gaussians exceed the int32 indices", n_);
     has_model_ = true;
     composited_ = composite_grads_ = false;
-    const int n = static_cast<int>(n_);
     rest_count_ = model.sh_rest_count();
     camera_ = camera;
     options_ = options;
@@ -102,92 +101,11 @@ public:
       if (has_multiplier_) backend_.upload(multiplier_, opacity_multiplier, n_);
       uploaded_ = uploaded;
     }
-    mean2d_.resize(n_ * 2);
-    conic_.resize(n_ * 3);
-    depth_.resize(n_);
-    opacity_.resize(n_);
-    radii_.resize(n_);
-    color_.resize(n_ * 3);
-    clamped_.resize(n_ * 3);
-    rects_.resize(n_ * 4);
-    counts_.resize(n_);
-    offsets_.resize(n_);
+    launch_forward();
 
     auto& out = out_;
-    out.tiles_x = (camera.width + kTileSize - 1) / kTileSize;
-    out.tiles_y = (camera.height + kTileSize - 1) / kTileSize;
+    const std::size_t ms = static_cast<std::size_t>(intersections_);
     const int tiles = out.tiles_x * out.tiles_y;
-    const int blocks = blocks_for(n);
-
-    ProjectionFwdArgs p;
-    p.n = n;
-    p.tiles_x = out.tiles_x;
-    p.tiles_y = out.tiles_y;
-    p.means = means_.data();
-    p.log_scales = log_scales_.data();
-    p.quats = quats_.data();
-    p.opacity_logits = opacity_logits_.data();
-    p.multiplier = has_multiplier_ ? multiplier_.data() : nullptr;
-    p.cam = camera;
-    p.mean2d = mean2d_.data();
-    p.conic = conic_.data();
-    p.depth = depth_.data();
-    p.opacity = opacity_.data();
-    p.radii = radii_.data();
-    backend_.template launch<ProjectionFwdKernel>(blocks, kBlockThreads, p);
-
-    ShFwdArgs s;
-    s.n = n;
-    s.active_degree = options.active_degree;
-    s.rest_count = rest_count_;
-    s.means = means_.data();
-    s.sh_dc = sh_dc_.data();
-    s.sh_rest = sh_rest_.data();
-    s.radii = radii_.data();
-    for (int k = 0; k < 3; ++k) s.campos[k] = camera.campos[k];
-    s.color = color_.data();
-    s.color_clamped = clamped_.data();
-    backend_.template launch<ShFwdKernel>(blocks, kBlockThreads, s);
-
-    TileCountArgs c;
-    c.n = n;
-    c.tiles_x = out.tiles_x;
-    c.tiles_y = out.tiles_y;
-    c.height = camera.height;
-    c.alpha_min = static_cast<float>(options.alpha_min);
-    c.mean2d = mean2d_.data();
-    c.conic = conic_.data();
-    c.opacity = opacity_.data();
-    c.radii = radii_.data();
-    c.rects = rects_.data();
-    c.counts = counts_.data();
-    c.offsets = offsets_.data();
-    backend_.template launch<TileCountKernel>(blocks, kBlockThreads, c);
-    kernels::inclusive_scan(backend_, offsets_.data(), n, scan_levels_);
-
-    const int m = n > 0 ? backend_.read(offsets_, n_ - 1) : 0;  // the one value read back
-    const std::size_t ms = static_cast<std::size_t>(m);
-    keys_.resize(ms);
-    keys_sorted_.resize(ms);
-    gaussians_.resize(ms);
-    gaussians_sorted_.resize(ms);
-    ranges_.resize(static_cast<std::size_t>(tiles) * 2);
-    EmitKeysArgs e;
-    e.n = n;
-    e.tiles = c;
-    e.offsets = offsets_.data();
-    e.depth = depth_.data();
-    e.keys = keys_.data();
-    e.gaussians = gaussians_.data();
-    backend_.template launch<EmitKeysKernel>(blocks, kBlockThreads, e);
-    backend_.sort_pairs(keys_, keys_sorted_, gaussians_, gaussians_sorted_, ms, 32 + tile_id_bits(tiles));
-    backend_.zero(ranges_, static_cast<std::size_t>(tiles) * 2);
-    TileRangesArgs r;
-    r.m = m;
-    r.keys = keys_sorted_.data();
-    r.ranges = ranges_.data();
-    backend_.template launch<TileRangesKernel>(blocks_for(m), kBlockThreads, r);
-
     copy_out(out.mean2d, mean2d_, n_ * 2);
     copy_out(out.conic, conic_, n_ * 3);
     copy_out(out.depth, depth_, n_);
@@ -244,27 +162,13 @@ public:
     const int width = camera_.width, height = camera_.height;
     if (width <= 0 || height <= 0) fail("stages: composite() needs forward() or load_projected() first");
     composite_options_ = options;
+    launch_composite_forward();
     const std::size_t pixels = static_cast<std::size_t>(width) * height;
-    rgb_.resize(pixels * 3);
-    alpha_.resize(pixels);
-    pixel_depth_.resize(pixels);
-    final_t_.resize(pixels);
-    n_contrib_.resize(pixels);
-    auto c = composite_args<CompositeFwdArgs>();
-    c.rgb = rgb_.data();
-    c.alpha = alpha_.data();
-    c.out_depth = pixel_depth_.data();
-    c.final_t = final_t_.data();
-    c.n_contrib = n_contrib_.data();
-    launch_composite<CompositeFwdKernel>(backend_, out_.tiles_x * out_.tiles_y, c, options.smooth_cutoff,
-                                         options.fused_multiply_add);
     copy_out(composite_out_.rgb, rgb_, pixels * 3);
     copy_out(composite_out_.alpha, alpha_, pixels);
     copy_out(composite_out_.depth, pixel_depth_, pixels);
     copy_out(composite_out_.final_transmittance, final_t_, pixels);
     copy_out(composite_out_.n_contrib, n_contrib_, pixels);
-    composited_ = true;
-    composite_grads_ = false;
     return composite_out_;
   }
 
@@ -275,36 +179,12 @@ public:
     if (d_rgb) backend_.upload(d_rgb_, d_rgb, pixels * 3);
     if (d_alpha) backend_.upload(d_alpha_, d_alpha, pixels);
     if (d_depth) backend_.upload(d_pixel_depth_, d_depth, pixels);
-    d_mean2d_.resize(n_ * 2);
-    d_conic_.resize(n_ * 3);
-    d_depth_.resize(n_);
-    d_opacity_.resize(n_);
-    d_color_.resize(n_ * 3);
-    backend_.zero(d_mean2d_, n_ * 2);
-    backend_.zero(d_conic_, n_ * 3);
-    backend_.zero(d_depth_, n_);
-    backend_.zero(d_opacity_, n_);
-    backend_.zero(d_color_, n_ * 3);
-    auto c = composite_args<CompositeBwdArgs>();
-    c.clamp_pass_through = composite_options_.clamp_pass_through;
-    c.final_t = final_t_.data();
-    c.n_contrib = n_contrib_.data();
-    c.d_rgb = d_rgb ? d_rgb_.data() : nullptr;
-    c.d_alpha = d_alpha ? d_alpha_.data() : nullptr;
-    c.d_depth = d_depth ? d_pixel_depth_.data() : nullptr;
-    c.d_mean2d = d_mean2d_.data();
-    c.d_conic = d_conic_.data();
-    c.d_opacity = d_opacity_.data();
-    c.d_color = d_color_.data();
-    c.d_splat_depth = d_depth_.data();
-    launch_composite<CompositeBwdKernel>(backend_, out_.tiles_x * out_.tiles_y, c, composite_options_.smooth_cutoff,
-                                         composite_options_.fused_multiply_add);
+    launch_composite_backward(d_rgb != nullptr, d_alpha != nullptr, d_depth != nullptr);
     copy_out(composite_grads_out_.mean2d, d_mean2d_, n_ * 2);
     copy_out(composite_grads_out_.conic, d_conic_, n_ * 3);
     copy_out(composite_grads_out_.depth, d_depth_, n_);
     copy_out(composite_grads_out_.opacity, d_opacity_, n_);
     copy_out(composite_grads_out_.color, d_color_, n_ * 3);
-    composite_grads_ = true;
     return composite_grads_out_;
   }
 
@@ -328,8 +208,150 @@ private:
     return c;
   }
 
-  // Projection and SH backward from the projected gradients in d_mean2d_ ... d_color_.
-  const BackwardStages& model_backward() {
+  // The launches of forward(): projection, SH, tile intersection of the n_ Gaussians in means_ ... with
+  // camera_ and options_; the one value read back is the number of intersections.
+  void launch_forward() {
+    const int n = static_cast<int>(n_);
+    mean2d_.resize(n_ * 2);
+    conic_.resize(n_ * 3);
+    depth_.resize(n_);
+    opacity_.resize(n_);
+    radii_.resize(n_);
+    color_.resize(n_ * 3);
+    clamped_.resize(n_ * 3);
+    rects_.resize(n_ * 4);
+    counts_.resize(n_);
+    offsets_.resize(n_);
+
+    auto& out = out_;
+    out.tiles_x = (camera_.width + kTileSize - 1) / kTileSize;
+    out.tiles_y = (camera_.height + kTileSize - 1) / kTileSize;
+    const int tiles = out.tiles_x * out.tiles_y;
+    const int blocks = blocks_for(n);
+
+    ProjectionFwdArgs p;
+    p.n = n;
+    p.tiles_x = out.tiles_x;
+    p.tiles_y = out.tiles_y;
+    p.means = means_.data();
+    p.log_scales = log_scales_.data();
+    p.quats = quats_.data();
+    p.opacity_logits = opacity_logits_.data();
+    p.multiplier = has_multiplier_ ? multiplier_.data() : nullptr;
+    p.cam = camera_;
+    p.mean2d = mean2d_.data();
+    p.conic = conic_.data();
+    p.depth = depth_.data();
+    p.opacity = opacity_.data();
+    p.radii = radii_.data();
+    backend_.template launch<ProjectionFwdKernel>(blocks, kBlockThreads, p);
+
+    ShFwdArgs s;
+    s.n = n;
+    s.active_degree = options_.active_degree;
+    s.rest_count = rest_count_;
+    s.means = means_.data();
+    s.sh_dc = sh_dc_.data();
+    s.sh_rest = sh_rest_.data();
+    s.radii = radii_.data();
+    for (int k = 0; k < 3; ++k) s.campos[k] = camera_.campos[k];
+    s.color = color_.data();
+    s.color_clamped = clamped_.data();
+    backend_.template launch<ShFwdKernel>(blocks, kBlockThreads, s);
+
+    TileCountArgs c;
+    c.n = n;
+    c.tiles_x = out.tiles_x;
+    c.tiles_y = out.tiles_y;
+    c.height = camera_.height;
+    c.alpha_min = static_cast<float>(options_.alpha_min);
+    c.mean2d = mean2d_.data();
+    c.conic = conic_.data();
+    c.opacity = opacity_.data();
+    c.radii = radii_.data();
+    c.rects = rects_.data();
+    c.counts = counts_.data();
+    c.offsets = offsets_.data();
+    backend_.template launch<TileCountKernel>(blocks, kBlockThreads, c);
+    kernels::inclusive_scan(backend_, offsets_.data(), n, scan_levels_);
+
+    const int m = n > 0 ? backend_.read(offsets_, n_ - 1) : 0;  // the one value read back
+    intersections_ = m;
+    const std::size_t ms = static_cast<std::size_t>(m);
+    keys_.resize(ms);
+    keys_sorted_.resize(ms);
+    gaussians_.resize(ms);
+    gaussians_sorted_.resize(ms);
+    ranges_.resize(static_cast<std::size_t>(tiles) * 2);
+    EmitKeysArgs e;
+    e.n = n;
+    e.tiles = c;
+    e.offsets = offsets_.data();
+    e.depth = depth_.data();
+    e.keys = keys_.data();
+    e.gaussians = gaussians_.data();
+    backend_.template launch<EmitKeysKernel>(blocks, kBlockThreads, e);
+    backend_.sort_pairs(keys_, keys_sorted_, gaussians_, gaussians_sorted_, ms, 32 + tile_id_bits(tiles));
+    backend_.zero(ranges_, static_cast<std::size_t>(tiles) * 2);
+    TileRangesArgs r;
+    r.m = m;
+    r.keys = keys_sorted_.data();
+    r.ranges = ranges_.data();
+    backend_.template launch<TileRangesKernel>(blocks_for(m), kBlockThreads, r);
+  }
+
+  // The launch of composite(): the image of the projected Gaussians with composite_options_.
+  void launch_composite_forward() {
+    const std::size_t pixels = static_cast<std::size_t>(camera_.width) * camera_.height;
+    rgb_.resize(pixels * 3);
+    alpha_.resize(pixels);
+    pixel_depth_.resize(pixels);
+    final_t_.resize(pixels);
+    n_contrib_.resize(pixels);
+    auto c = composite_args<CompositeFwdArgs>();
+    c.rgb = rgb_.data();
+    c.alpha = alpha_.data();
+    c.out_depth = pixel_depth_.data();
+    c.final_t = final_t_.data();
+    c.n_contrib = n_contrib_.data();
+    launch_composite<CompositeFwdKernel>(backend_, out_.tiles_x * out_.tiles_y, c, composite_options_.smooth_cutoff,
+                                         composite_options_.fused_multiply_add);
+    composited_ = true;
+    composite_grads_ = false;
+  }
+
+  // The launch of composite_backward() from the image gradients in d_rgb_, d_alpha_, d_pixel_depth_ (those
+  // flagged; the others zero), into d_mean2d_ ... d_color_.
+  void launch_composite_backward(bool has_rgb, bool has_alpha, bool has_depth) {
+    d_mean2d_.resize(n_ * 2);
+    d_conic_.resize(n_ * 3);
+    d_depth_.resize(n_);
+    d_opacity_.resize(n_);
+    d_color_.resize(n_ * 3);
+    backend_.zero(d_mean2d_, n_ * 2);
+    backend_.zero(d_conic_, n_ * 3);
+    backend_.zero(d_depth_, n_);
+    backend_.zero(d_opacity_, n_);
+    backend_.zero(d_color_, n_ * 3);
+    auto c = composite_args<CompositeBwdArgs>();
+    c.clamp_pass_through = composite_options_.clamp_pass_through;
+    c.final_t = final_t_.data();
+    c.n_contrib = n_contrib_.data();
+    c.d_rgb = has_rgb ? d_rgb_.data() : nullptr;
+    c.d_alpha = has_alpha ? d_alpha_.data() : nullptr;
+    c.d_depth = has_depth ? d_pixel_depth_.data() : nullptr;
+    c.d_mean2d = d_mean2d_.data();
+    c.d_conic = d_conic_.data();
+    c.d_opacity = d_opacity_.data();
+    c.d_color = d_color_.data();
+    c.d_splat_depth = d_depth_.data();
+    launch_composite<CompositeBwdKernel>(backend_, out_.tiles_x * out_.tiles_y, c, composite_options_.smooth_cutoff,
+                                         composite_options_.fused_multiply_add);
+    composite_grads_ = true;
+  }
+
+  // The launches of model_backward(): d_means_ ... d_sh_rest_ from d_mean2d_ ... d_color_.
+  void launch_model_backward() {
     const int n = static_cast<int>(n_);
     const std::size_t rest = n_ * static_cast<std::size_t>(rest_count_) * 3;
     d_means_.resize(n_ * 3);
@@ -374,7 +396,12 @@ private:
     s.d_sh_rest = d_sh_rest_.data();
     s.d_means = d_means_.data();
     backend_.template launch<ShBwdKernel>(blocks, kBlockThreads, s);
+  }
 
+  // Projection and SH backward from the projected gradients in d_mean2d_ ... d_color_.
+  const BackwardStages& model_backward() {
+    launch_model_backward();
+    const std::size_t rest = n_ * static_cast<std::size_t>(rest_count_) * 3;
     copy_out(grads_.means, d_means_, n_ * 3);
     copy_out(grads_.log_scales, d_log_scales_, n_ * 3);
     copy_out(grads_.quats, d_quats_, n_ * 4);
@@ -391,6 +418,68 @@ public:
   }
   void synchronize() override { backend_.synchronize(); }
 
+  // ---- Device-resident use, by code that knows the Backend (train/kernels/resident_step.hpp) ----
+  // The model lives in the pipeline's own arrays (model()), written there by the caller (an upload, Adam's
+  // kernel, a densification); forward_resident(), composite_resident() and backward_resident() run the
+  // launches of forward(), composite() and composite_backward() + backward_from_composite() without an
+  // upload or a copy to the host. The caller writes the image gradients into image_gradients() between
+  // composite_resident() and backward_resident().
+  template <class T>
+  using Array = typename Backend::template Array<T>;
+  struct ModelArrays {
+    Array<float>&means, &log_scales, &quats, &opacity_logits, &sh_dc, &sh_rest;
+  };
+  struct ImageArrays {
+    Array<float>&rgb, &alpha, &depth;  // H x W x 3, H x W, H x W
+  };
+
+  Backend& backend() { return backend_; }
+  ModelArrays model() { return {means_, log_scales_, quats_, opacity_logits_, sh_dc_, sh_rest_}; }
+  // The opacity multiplier of the next forward_resident(..., true) (n values).
+  Array<float>& multiplier() { return multiplier_; }
+  // d loss / d model of the last backward_resident().
+  ModelArrays gradients() {
+    return {d_means_, d_log_scales_, d_quats_, d_opacity_logits_, d_sh_dc_, d_sh_rest_};
+  }
+  ImageArrays image() { return {rgb_, alpha_, pixel_depth_}; }
+  ImageArrays image_gradients() { return {d_rgb_, d_alpha_, d_pixel_depth_}; }
+  Array<int>& radii() { return radii_; }
+  // d loss / d mean2d in pixels (n x 2) of the last backward_resident().
+  Array<float>& mean2d_gradient() { return d_mean2d_; }
+  int intersections() const { return intersections_; }
+
+  void forward_resident(std::size_t n, int sh_degree, bool with_multiplier, const CameraParams<float>& camera,
+                        const StageOptions& options) {
+    if (sh_degree < 0 || sh_degree > 3) fail("stages: model SH degree {} is outside 0..3", sh_degree);
+    if (options.active_degree < 0 || options.active_degree > sh_degree)
+      fail("stages: active SH degree {} is outside 0..{}", options.active_degree, sh_degree);
+    if (camera.width <= 0 || camera.height <= 0) fail("stages: camera size {}x{} is empty", camera.width, camera.height);
+    if (n > static_cast<std::size_t>(1) << 30) fail("stages: {} Gaussians exceed the int32 indices", n);
+    n_ = n;
+    rest_count_ = (sh_degree + 1) * (sh_degree + 1) - 1;
+    has_model_ = true;
+    composited_ = composite_grads_ = false;
+    camera_ = camera;
+    options_ = options;
+    has_multiplier_ = with_multiplier;
+    uploaded_ = UploadedModel{};  // the arrays no longer hold an upload of timing mode's
+    launch_forward();
+  }
+  void composite_resident(const CompositeOptions& options) {
+    if (!has_model_) fail("stages: composite_resident() needs forward_resident() first");
+    composite_options_ = options;
+    launch_composite_forward();
+    const std::size_t pixels = static_cast<std::size_t>(camera_.width) * camera_.height;
+    d_rgb_.resize(pixels * 3);
+    d_alpha_.resize(pixels);
+    d_pixel_depth_.resize(pixels);
+  }
+  void backward_resident(bool with_alpha, bool with_depth) {
+    if (!composited_) fail("stages: backward_resident() needs composite_resident() first");
+    launch_composite_backward(true, with_alpha, with_depth);
+    launch_model_backward();
+  }
+
   std::vector<int> inclusive_scan(const std::vector<int>& values) override {
     backend_.upload(scan_data_, values.data(), values.size());
     kernels::inclusive_scan(backend_, scan_data_.data(), static_cast<int>(values.size()), scan_levels_);
@@ -400,9 +489,6 @@ public:
   }
 
 private:
-  template <class T>
-  using Array = typename Backend::template Array<T>;
-
   // An output's copy to the host, skipped in timing mode.
   template <class T>
   void copy_out(std::vector<T>& dst, const Array<T>& src, std::size_t n) {
@@ -445,6 +531,7 @@ private:
   Array<float> d_means_, d_log_scales_, d_quats_, d_opacity_logits_, d_sh_dc_, d_sh_rest_;
   Array<float> rgb_, alpha_, pixel_depth_, final_t_, d_rgb_, d_alpha_, d_pixel_depth_;
   Array<int> n_contrib_;
+  int intersections_ = 0;  // of the last forward
   ForwardStages out_;
   BackwardStages grads_;
   CompositeStages composite_out_;

@@ -2,6 +2,7 @@
 // densification kernels report that there is no GPU.
 #include "d2gs/core/error.hpp"
 #include "d2gs/render/cuda/device.hpp"
+#include "d2gs/train/kernels/device_step.hpp"
 #include "d2gs/train/kernels/optim.hpp"
 
 namespace d2gs::train_kernels {
@@ -50,5 +51,11 @@ DensifyReport device_prune_by_opacity(Gaussians&, AdamState&, GradientStats&, fl
   fail("CUDA: {}", cuda::describe_device());
 }
 void device_reset_opacity(Gaussians&, AdamState&, float) { fail("CUDA: {}", cuda::describe_device()); }
+
+}  // namespace d2gs::train_kernels
+
+namespace d2gs::train_kernels {
+
+std::unique_ptr<DeviceStep> make_device_step() { fail("CUDA: {}", cuda::describe_device()); }
 
 }  // namespace d2gs::train_kernels

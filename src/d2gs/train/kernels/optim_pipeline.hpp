@@ -27,6 +27,21 @@ inline AdamScalars adam_scalars(double lr, double bias1, double bias2) {
   return s;
 }
 
+// One parameter group's update in the backend's memory: n values of param, grad and the moments.
+template <class Backend>
+void adam_group(Backend& backend, float* param, const float* grad, float* exp_avg, float* exp_avg_sq, std::size_t n,
+                const AdamScalars& scalars) {
+  if (n == 0) return;
+  AdamArgs a;
+  a.n = static_cast<int>(n);
+  a.param = param;
+  a.grad = grad;
+  a.exp_avg = exp_avg;
+  a.exp_avg_sq = exp_avg_sq;
+  a.s = scalars;
+  render::kernels::launch_per_item<AdamKernel>(backend, static_cast<long long>(n), a);
+}
+
 template <class Backend>
 void adam_step(Backend& backend, Gaussians& model, const Gaussians& grads, AdamState& state, const LearningRates& lr,
                float means_lr, bool skip_opacity) {
@@ -46,14 +61,7 @@ void adam_step(Backend& backend, Gaussians& model, const Gaussians& grads, AdamS
     backend.upload(g, grad.data(), n);
     backend.upload(m, exp_avg.data(), n);
     backend.upload(v, exp_avg_sq.data(), n);
-    AdamArgs a;
-    a.n = static_cast<int>(n);
-    a.param = p.data();
-    a.grad = g.data();
-    a.exp_avg = m.data();
-    a.exp_avg_sq = v.data();
-    a.s = adam_scalars(rate, bias1, bias2);
-    render::kernels::launch_per_item<AdamKernel>(backend, static_cast<long long>(n), a);
+    adam_group(backend, p.data(), g.data(), m.data(), v.data(), n, adam_scalars(rate, bias1, bias2));
     backend.download(param, p, n);
     backend.download(exp_avg, m, n);
     backend.download(exp_avg_sq, v, n);
@@ -68,6 +76,23 @@ void adam_step(Backend& backend, Gaussians& model, const Gaussians& grads, AdamS
   group(model.quats, grads.quats, em.quats, ev.quats, lr.quats);
 }
 
+// The L1 kernel on arrays of the backend: grad (if non-null) += scale/count · sign(a − b); `sum` (one double,
+// set here) receives the sum of |a − b| for the caller to read.
+template <class Backend>
+void l1_loss_launch(Backend& backend, const float* a, const float* b, std::size_t count, float* grad, float scale,
+                    typename Backend::template Array<double>& sum) {
+  sum.resize(1);
+  backend.zero(sum, 1);
+  L1Args args;
+  args.n = static_cast<int>(count);
+  args.a = a;
+  args.b = b;
+  args.grad = grad;
+  args.g = scale / static_cast<float>(count);
+  args.sum = sum.data();
+  render::kernels::launch_per_item<L1Kernel>(backend, static_cast<long long>(count), args);
+}
+
 template <class Backend>
 double l1_loss(Backend& backend, const float* a, const float* b, std::size_t count, float* grad, float scale) {
   if (count == 0) return 0.0;
@@ -77,16 +102,7 @@ double l1_loss(Backend& backend, const float* a, const float* b, std::size_t cou
   backend.upload(da, a, count);
   backend.upload(db, b, count);
   if (grad) backend.upload(dg, grad, count);
-  const double zero = 0.0;
-  backend.upload(sum, &zero, 1);
-  L1Args args;
-  args.n = static_cast<int>(count);
-  args.a = da.data();
-  args.b = db.data();
-  args.grad = grad ? dg.data() : nullptr;
-  args.g = scale / static_cast<float>(count);
-  args.sum = sum.data();
-  render::kernels::launch_per_item<L1Kernel>(backend, static_cast<long long>(count), args);
+  l1_loss_launch(backend, da.data(), db.data(), count, grad ? dg.data() : nullptr, scale, sum);
   if (grad) {
     std::vector<float> out;
     backend.download(out, dg, count);

@@ -32,29 +32,36 @@ inline const std::array<uint64_t, 4 * kJumpBits>& dropout_jump_table() {
   return table;
 }
 
-// dropgaussian_mask (probabilities null) or bernoulli_mask of the n probabilities at `probabilities`, an
-// array of the backend (device memory): the same multipliers from the same draws, and rng left where the
-// CPU leaves it (n draws on).
+// What the dropout mask kernel keeps in the backend's memory between calls: the jump table (uploaded
+// once) and the stream's state after the draws (read back: the host's Rng goes on from it).
 template <class Backend>
-void dropout_mask_of(Backend& backend, std::size_t n, const float* probabilities, double rate, bool compensate,
-                     Rng& rng, std::vector<float>& multiplier) {
-  multiplier.resize(n);
+struct DropoutMaskBuffers {
+  typename Backend::template Array<uint64_t> jumps, end_state;
+  bool jumps_uploaded = false;
+};
+
+// dropgaussian_mask (probabilities null) or bernoulli_mask of the n probabilities at `probabilities`, an
+// array of the backend (device memory), into `multiplier` (n values of the backend's memory): the same
+// multipliers from the same draws, and rng left where the CPU leaves it (n draws on).
+template <class Backend>
+void dropout_mask_into(Backend& backend, DropoutMaskBuffers<Backend>& buffers, std::size_t n,
+                       const float* probabilities, double rate, bool compensate, Rng& rng, float* multiplier) {
   if (n == 0) return;
   const long long chunks = (static_cast<long long>(n) + kDrawsPerThread - 1) / kDrawsPerThread;
   if (n > static_cast<std::size_t>(1u << 31) - 1 || chunks >= (1LL << kJumpBits))
     fail("dropout kernel: {} Gaussians exceed the int32 indices", n);
-  typename Backend::template Array<uint64_t> jumps, end_state;
-  typename Backend::template Array<float> out;
-  const auto& table = dropout_jump_table();
-  backend.upload(jumps, table.data(), table.size());
-  end_state.resize(4);
-  out.resize(n);
+  if (!buffers.jumps_uploaded) {
+    const auto& table = dropout_jump_table();
+    backend.upload(buffers.jumps, table.data(), table.size());
+    buffers.jumps_uploaded = true;
+  }
+  buffers.end_state.resize(4);
   DropoutMaskArgs a;
   a.n = static_cast<int>(chunks);
   a.count = static_cast<int>(n);
   const Rng::State before = rng.state();
   for (int k = 0; k < 4; ++k) a.state[k] = before.words[k];
-  a.jumps = jumps.data();
+  a.jumps = buffers.jumps.data();
   if (probabilities) {
     a.probabilities = probabilities;
     a.compensate = compensate;
@@ -62,15 +69,27 @@ void dropout_mask_of(Backend& backend, std::size_t n, const float* probabilities
     a.rate = rate;
     a.keep_scale = static_cast<float>(1.0 / (1.0 - rate));
   }
-  a.multiplier = out.data();
-  a.end_state = end_state.data();
+  a.multiplier = multiplier;
+  a.end_state = buffers.end_state.data();
   render::kernels::launch_per_item<DropoutMaskKernel>(backend, chunks, a);
-  backend.download(multiplier, out, n);
   std::vector<uint64_t> after;
-  backend.download(after, end_state, 4);
+  backend.download(after, buffers.end_state, 4);
   Rng::State state = before;
   for (int k = 0; k < 4; ++k) state.words[k] = after[static_cast<std::size_t>(k)];
   rng.set_state(state);
+}
+
+// The same into a host vector.
+template <class Backend>
+void dropout_mask_of(Backend& backend, std::size_t n, const float* probabilities, double rate, bool compensate,
+                     Rng& rng, std::vector<float>& multiplier) {
+  multiplier.resize(n);
+  if (n == 0) return;
+  DropoutMaskBuffers<Backend> buffers;
+  typename Backend::template Array<float> out;
+  out.resize(n);
+  dropout_mask_into(backend, buffers, n, probabilities, rate, compensate, rng, out.data());
+  backend.download(multiplier, out, n);
 }
 
 // The same with host probabilities (null: DropGaussian's mask).

@@ -52,11 +52,28 @@ public:
     const std::size_t values = static_cast<std::size_t>(width) * height * channels;
     if (ref.b.size() != values || ref.mu_b.size() != values || ref.s_bb.size() != values)
       fail("SSIM kernels: invalid reference image");
-    const int n = static_cast<int>(values);
     backend_.upload(a_, a, values);
     backend_.upload(b_, ref.b.data(), values);
     backend_.upload(mu_b_, ref.mu_b.data(), values);
     backend_.upload(s_bb_, ref.s_bb.data(), values);
+    if (grad) backend_.upload(grad_, grad, values);  // the gradient so far, which the kernel adds to
+    const double mean = evaluate_on(a_.data(), b_.data(), mu_b_.data(), s_bb_.data(), width, height, channels,
+                                    grad ? grad_.data() : nullptr, grad_scale);
+    if (grad) {
+      std::vector<float> out;
+      backend_.download(out, grad_, values);
+      std::copy(out.begin(), out.end(), grad);
+    }
+    return mean;
+  }
+
+  // The same on arrays of the backend: a (the prediction, interleaved), the reference's planes b, mu_b, s_bb
+  // (Reference's layout) and grad (if non-null, interleaved), which the gradient is added to.
+  double evaluate_on(const float* a, const float* b, const float* mu_b, const float* s_bb, int width, int height,
+                     int channels, float* grad, float grad_scale) {
+    check_size(width, height, channels);
+    const std::size_t values = static_cast<std::size_t>(width) * height * channels;
+    const int n = static_cast<int>(values);
 
     // The blurs' inputs a, a², a·b, and their local means mu_a, s_aa, s_ab (C planes each).
     planes_.resize(3 * values);
@@ -64,8 +81,8 @@ public:
     p.n = n;
     p.pixels = width * height;
     p.channels = channels;
-    p.a = a_.data();
-    p.b = b_.data();
+    p.a = a;
+    p.b = b;
     p.planes = planes_.data();
     render::kernels::launch_per_item<SsimPlanesKernel>(backend_, n, p);
     blur(planes_, 3 * n, width, height, blurred_);
@@ -80,8 +97,8 @@ public:
     m.mu_a = blurred_.data();
     m.s_aa = blurred_.data() + values;
     m.s_ab = blurred_.data() + 2 * values;
-    m.mu_b = mu_b_.data();
-    m.s_bb = s_bb_.data();
+    m.mu_b = mu_b;
+    m.s_bb = s_bb;
     m.c1 = static_cast<float>(kSsimC1);
     m.c2 = static_cast<float>(kSsimC2);
     m.g = grad_scale * static_cast<float>(inv_count);
@@ -100,21 +117,17 @@ public:
 
     if (grad) {
       blur(planes_, 3 * n, width, height, blurred_);  // blurred_ (mu_a, s_aa, s_ab) is no longer needed
-      backend_.upload(grad_, grad, values);  // the gradient so far, which the kernel adds to
       SsimGradArgs g;
       g.n = n;
       g.pixels = width * height;
       g.channels = channels;
-      g.a = a_.data();
-      g.b = b_.data();
+      g.a = a;
+      g.b = b;
       g.blurred_d_mu = blurred_.data();
       g.blurred_d_saa = blurred_.data() + values;
       g.blurred_d_sab = blurred_.data() + 2 * values;
-      g.grad = grad_.data();
+      g.grad = grad;
       render::kernels::launch_per_item<SsimGradKernel>(backend_, n, g);
-      std::vector<float> out;
-      backend_.download(out, grad_, values);
-      std::copy(out.begin(), out.end(), grad);
     }
     return backend_.read(sum_, 0) * inv_count;
   }

@@ -15,6 +15,11 @@ public:
     dropgaussian_mask(step.model.size(), dropgaussian_rate(step.iteration, iterations_, max_rate_), step.rng, multiplier_);
     return {multiplier_.data(), drop_fraction(multiplier_)};
   }
+  // The same mask drawn on the device from the same stream (train/kernels/dropout_kernels.hpp).
+  bool runs_on_device() const override { return true; }
+  DeviceMultiplier device_multiplier(int iteration) const override {
+    return {true, dropgaussian_rate(iteration, iterations_, max_rate_)};
+  }
 
 private:
   double max_rate_;

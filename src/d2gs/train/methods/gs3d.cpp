@@ -7,6 +7,7 @@ namespace {
 class Gs3d final : public TrainingMethod {
 public:
   const char* name() const override { return "3dgs"; }
+  bool runs_on_device() const override { return true; }  // no hook: no multiplier
 };
 
 }  // namespace

@@ -81,6 +81,13 @@ struct MethodLoss {
   float* grad_alpha = nullptr;
 };
 
+// What the device-resident step (--device cuda|emulated, train/kernels/device_step.hpp) draws as an
+// iteration's opacity multiplier: DropGaussian's uniform dropout at `rate`, or none.
+struct DeviceMultiplier {
+  bool dropgaussian = false;
+  double rate = 0.0;
+};
+
 // A term of the loss: loss += weight · value; logged under `name` (train_log.jsonl).
 struct LossTerm {
   std::string name;
@@ -127,6 +134,14 @@ public:
   virtual void before_update(int /*iteration*/, Gaussians& /*model*/) {}
   // After densify_and_prune (report.source: where each new row came from) or any other edit of the rows.
   virtual void after_densify(const DensifyReport& /*report*/) {}
+
+  // ---- the device-resident step ----
+  // Whether the device's step can stand in for every per-iteration hook of this method (prepare,
+  // opacity_multiplier, loss_terms, before_update: then none of them is called, and device_multiplier()
+  // says what the device draws instead). false (the default): with --device cuda|emulated the trainer keeps
+  // the hooks on the host and runs only the rasterizer on the device. after_densify() is called either way.
+  virtual bool runs_on_device() const { return false; }
+  virtual DeviceMultiplier device_multiplier(int /*iteration*/) const { return {}; }
 
   // ---- checkpoints ----
   virtual MethodState state() const { return {}; }
