@@ -9,11 +9,14 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <memory>
 #include <random>
 #include <string>
 #include <vector>
+
+#include <glm/gtc/quaternion.hpp>
 
 #include "cuda/stage_compare.hpp"
 #include "d2gs/core/error.hpp"
@@ -28,6 +31,8 @@
 #include "d2gs/train/kernels/device_step.hpp"
 #include "d2gs/train/kernels/optim.hpp"
 #include "d2gs/train/loss_math.hpp"
+#include "d2gs/train/losses.hpp"
+#include "d2gs/scene/camera.hpp"
 #include "test_errors.hpp"
 
 namespace d2gs::test {
@@ -78,7 +83,39 @@ struct Schedule {
   bool dropgaussian = true;
   double drop_rate = 0.1;
   float lambda_dssim = 0.2f;
+  bool d2gs = false;  // DD-Drop's multiplier (instead of DropGaussian's) and the DAFE term
 };
+
+// D²GS's inputs: a camera for the depths, density scores for n Gaussians (new ones after a densification),
+// a far-region mask per view.
+Camera dd_camera() {
+  Camera cam;
+  cam.width = 64;
+  cam.height = 48;
+  cam.R_world_to_cam = glm::mat3_cast(glm::normalize(glm::dquat(0.9, 0.1, -0.2, 0.3)));
+  cam.t_world_to_cam = glm::dvec3(0.1, -0.2, 3.0);
+  return cam;
+}
+std::vector<float> density_scores_for(std::size_t n) {
+  std::mt19937 rng(static_cast<unsigned>(n));
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  std::vector<float> d(n);
+  for (float& v : d) v = u(rng);
+  return d;
+}
+std::vector<std::vector<std::uint8_t>> far_masks() {
+  std::mt19937 rng(31);
+  std::vector<std::vector<std::uint8_t>> masks(2, std::vector<std::uint8_t>(64 * 48));
+  for (auto& m : masks)
+    for (auto& v : m) v = rng() % 3 == 0;
+  return masks;
+}
+DdDropOptions dd_options() {
+  DdDropOptions o;
+  o.compensate = true;
+  return o;
+}
+constexpr float kDafeWeight = 0.5f;
 
 tk::ResidentRender render_of(const render::RenderCamera& cam, int active_degree, const Schedule& sc) {
   tk::ResidentRender r;
@@ -104,7 +141,7 @@ struct Trajectory {
   Gaussians model;
   AdamState adam;
   GradientStats stats;
-  std::vector<double> l1, ssim, drop_fraction;
+  std::vector<double> l1, ssim, drop_fraction, dafe;
   Rng dropout = Rng::stream(7, "dropout"), densify = Rng::stream(7, "densify");
 };
 
@@ -126,15 +163,22 @@ Trajectory one_by_one(const StepScene& s, const Schedule& sc) {
     const tk::ResidentRender r = render_of(s.cameras[view], std::min(k / 2, 3), sc);
     std::vector<float> mult;
     if (sc.dropgaussian) tk::emulated_dropgaussian_mask(t.model.size(), sc.drop_rate, t.dropout, mult);
-    t.drop_fraction.push_back(sc.dropgaussian ? drop_fraction(mult) : 0.0);
+    if (sc.d2gs)
+      tk::emulated_dd_drop_mask(t.model, dd_camera(), density_scores_for(t.model.size()), dd_options(), k, t.dropout,
+                                mult);
+    const bool multiplied = sc.dropgaussian || sc.d2gs;
+    t.drop_fraction.push_back(multiplied ? drop_fraction(mult) : 0.0);
     render::RenderOptions ro;
     ro.background = {r.composite.background[0], r.composite.background[1], r.composite.background[2]};
     ro.sh_degree = r.stages.active_degree;
-    const auto& out = raster->forward(t.model, sc.dropgaussian ? mult.data() : nullptr, r.camera, ro);
+    const auto& out = raster->forward(t.model, multiplied ? mult.data() : nullptr, r.camera, ro);
     std::vector<float> pred(out.rgb.size()), grad(out.rgb.size(), 0.0f);
     for (std::size_t i = 0; i < pred.size(); ++i) pred[i] = clamp_unit(out.rgb[i]);
     t.l1.push_back(tk::emulated_l1_loss(pred.data(), s.images[view].pixels.data(), pred.size(), grad.data(), 1.0f));
     t.ssim.push_back(tk::emulated_ssim(pred.data(), s.refs[view], grad.data(), -sc.lambda_dssim));
+    if (sc.d2gs)
+      t.dafe.push_back(tk::emulated_dafe_loss(pred.data(), s.images[view].pixels.data(), 64, 48, 3, far_masks()[view],
+                                              DafeLossForm::Paper, grad.data(), kDafeWeight));
     for (std::size_t i = 0; i < pred.size(); ++i)
       if (clamp_blocks_gradient(out.rgb[i])) grad[i] = 0.0f;
     const auto radii = out.radii;
@@ -156,10 +200,28 @@ Trajectory resident(tk::DeviceStep& step, const StepScene& s, const Schedule& sc
   step.set_training_views(s.images, s.refs);
   step.upload(t.model, t.adam, t.stats);
   const LearningRates lr;
+  const auto masks = far_masks();
   for (int k = 1; k <= sc.steps; ++k) {
     const std::size_t view = static_cast<std::size_t>(k % 2);
-    const tk::ResidentLoss loss =
-        step.render_and_backward(view, render_of(s.cameras[view], std::min(k / 2, 3), sc), t.dropout, sc.lambda_dssim);
+    tk::ResidentRender r = render_of(s.cameras[view], std::min(k / 2, 3), sc);
+    const std::vector<float> density = density_scores_for(t.model.size());
+    tk::ResidentDdDrop dd;
+    tk::ResidentDafe dafe;
+    if (sc.d2gs) {
+      dd.options = dd_options();
+      dd.camera = dd_camera();
+      dd.iteration = k;
+      dd.density = &density;
+      dd.density_version = t.model.size();  // new scores with every new size
+      r.dd_drop = &dd;
+      dafe.mask = &masks[view];
+      dafe.mask_version = 1;
+      dafe.form = DafeLossForm::Paper;
+      dafe.weight = kDafeWeight;
+      r.dafe = &dafe;
+    }
+    const tk::ResidentLoss loss = step.render_and_backward(view, r, t.dropout, sc.lambda_dssim);
+    if (sc.d2gs) t.dafe.push_back(loss.dafe);
     t.l1.push_back(loss.l1);
     t.ssim.push_back(loss.ssim);
     t.drop_fraction.push_back(loss.drop_fraction);
@@ -178,9 +240,8 @@ Trajectory resident(tk::DeviceStep& step, const StepScene& s, const Schedule& sc
   return t;
 }
 
-TEST(ResidentStep, EmulatedEqualsTheKernelsCalledOneByOne) {
+void expect_resident_equals_one_by_one(const Schedule& sc) {
   const StepScene s = step_scene();
-  const Schedule sc;
   const Trajectory want = one_by_one(s, sc);
   auto step = tk::make_emulated_step();
   const Trajectory got = resident(*step, s, sc);
@@ -203,7 +264,19 @@ TEST(ResidentStep, EmulatedEqualsTheKernelsCalledOneByOne) {
   EXPECT_EQ(got.ssim, want.ssim);
   EXPECT_EQ(got.drop_fraction, want.drop_fraction);
   EXPECT_GT(got.drop_fraction[0], 0.0);
+  EXPECT_EQ(got.dafe, want.dafe);
   for (int w = 0; w < 4; ++w) EXPECT_EQ(got.dropout.state().words[w], want.dropout.state().words[w]);
+}
+
+TEST(ResidentStep, EmulatedEqualsTheKernelsCalledOneByOne) { expect_resident_equals_one_by_one(Schedule{}); }
+
+// D²GS's step: DD-Drop's probabilities from the means on the device and the density scores (uploaded again
+// when a densification changed the model's size), its mask, and the DAFE term on each view's mask.
+TEST(ResidentStep, EmulatedD2gsEqualsTheKernelsCalledOneByOne) {
+  Schedule sc;
+  sc.dropgaussian = false;
+  sc.d2gs = true;
+  expect_resident_equals_one_by_one(sc);
 }
 
 TEST(ResidentStep, OneStepMovesEveryParameterGroup) {

@@ -63,14 +63,13 @@ TEST(DeviceChoice, CudaThatCannotBeHadIsAOneLineError) {
   EXPECT_NE(message.find("use --device cpu or auto"), std::string::npos) << message;
 }
 
-// Training with --device cuda on a GPU: the whole step there for 3dgs and dropgaussian, the rasterizer for
-// the methods whose hooks stay on the CPU, said so.
+// Training with --device cuda on a GPU: the whole step there, the rasterizer alone with regularisers (their
+// hooks stay on the CPU), said so.
 TEST(DeviceChoice, CudaTrainingIsTheRasterizerOnTheGpu) {
   if (cuda::device_count() == 0) GTEST_SKIP() << cuda::describe_device();
   const render::DeviceChoice c = render::choose_device(render::DeviceRequest::Cuda, render::DeviceWork::Train);
   EXPECT_EQ(c.device, render::Device::Cuda);
-  EXPECT_NE(c.description.find("the whole training step for 3dgs and dropgaussian, the rasterizer for d2gs"),
-            std::string::npos)
+  EXPECT_NE(c.description.find("the whole training step, or with --regularisers the rasterizer"), std::string::npos)
       << c.description;
   // auto still takes the CPU for training, and says why.
   const render::DeviceChoice a = render::choose_device(render::DeviceRequest::Auto, render::DeviceWork::Train);
@@ -173,17 +172,18 @@ TEST(DeviceCli, EmulatedKernelsTrainAndEvaluateLikeTheCpu) {
   EXPECT_NEAR(je["mean"]["PSNR"].get<double>(), jc["mean"]["PSNR"].get<double>(), 1e-3);
 }
 
-// The device-resident step (train/kernels/device_step.hpp) in a whole run: DropGaussian through the emulator
-// with densification, an opacity reset and its saves and tests brought to the host, against the CPU's run
+// The device-resident step (train/kernels/device_step.hpp) in a whole run: D²GS through the emulator (DD-Drop
+// on the device, its density scores refreshed on the host at iterations 1 and 5) with densification, an
+// opacity reset and its saves and tests brought to the host, against the CPU's run
 // (losses and sizes per iteration, the final PSNR), and stopped and resumed from a checkpoint bit for bit.
 // The gradient threshold selects every Gaussian seen (a threshold near some Gaussian's statistic could fall
 // either way between two runs that differ in the last bits).
 TEST(DeviceCli, ResidentStepTrainsLikeTheCpuAndResumes) {
   const auto dir = test::scratch_dir();
   const std::string common = fmt::format(
-      "-q train -s '{}' -r 8 --n-views 3 --init random --random-points 400 --method dropgaussian --iterations 7 "
+      "-q train -s '{}' -r 8 --n-views 3 --init random --random-points 400 --method d2gs --iterations 7 "
       "--log-every 1 --seed 3 --densify-from 2 --densify-every 2 --densify-grad-threshold 1e-30 "
-      "--opacity-reset-at 6 --test-iterations 4",
+      "--opacity-reset-at 6 --test-iterations 4 --density-refresh-every 5",
       fern());
   nlohmann::json logs[2];
   for (int k = 0; k < 2; ++k) {

@@ -45,9 +45,8 @@ const char* to_string(Device device) {
 const char* to_string(DeviceWork work) { return work == DeviceWork::Render ? "rendering" : "a training step"; }
 
 // Rendering: projection, SH, tile intersection and compositing, forward and backward, are kernels. A training
-// step runs wholly on the device only for 3dgs and dropgaussian so far (train/kernels/device_step.hpp;
-// D²GS's DD-Drop and DAFE hooks still run on the host), and its speed on a GPU is not yet measured, so
-// `auto` keeps training on the CPU until it is.
+// step runs wholly on the device (train/kernels/device_step.hpp; with --regularisers only the rasterizer),
+// but its speed and parity on a GPU are not yet measured, so `auto` keeps training on the CPU until they are.
 bool cuda_backend_runs(DeviceWork work) { return work == DeviceWork::Render; }
 
 std::string describe_cpu_backend() {
@@ -67,9 +66,8 @@ DeviceChoice choose_device(DeviceRequest request, DeviceWork work) {
     return {Device::Emulated,
             work == DeviceWork::Render
                 ? "the CUDA backend's kernels emulated on the CPU (slow: for checking the kernels)"
-                : "the CUDA backend's kernels emulated on the CPU: the whole training step for 3dgs and "
-                  "dropgaussian, the rasterizer for d2gs and regularisers (their hooks on the CPU) (slow: for "
-                  "checking the kernels)",
+                : "the CUDA backend's kernels emulated on the CPU: the whole training step, or with "
+                  "--regularisers the rasterizer (their hooks on the CPU) (slow: for checking the kernels)",
             ""};
   // Why CUDA cannot be used, or empty when it can.
   std::string why;
@@ -82,8 +80,8 @@ DeviceChoice choose_device(DeviceRequest request, DeviceWork work) {
   if (request == DeviceRequest::Cuda && cuda::device_count() > 0)  // a training step, asked for by name
     return {Device::Cuda,
             "CUDA " + cuda::describe_device() +
-                ": the whole training step for 3dgs and dropgaussian, the rasterizer for d2gs and regularisers "
-                "(their hooks on the CPU; issue 27)",
+                ": the whole training step, or with --regularisers the rasterizer (their hooks on the CPU; "
+                "issue 27)",
             ""};
   if (request == DeviceRequest::Cuda) fail("--device cuda: {}; use --device cpu or auto", why);
   cpu_choice.reason = why;

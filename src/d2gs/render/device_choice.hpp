@@ -1,11 +1,9 @@
 #pragma once
 // Which backend a command runs on: `--device cpu|cuda|auto` of d2gs train, render and eval, and what
 // `d2gs info` reports. The CPU backend is the reference and runs everything. The CUDA backend
-// (render/cuda/, render/kernels/) renders, forward and backward, on the device; it does not yet run a
-// whole training step (docs/architecture.md, "CUDA backend and its CPU emulation"). Until it does,
-// `train --device cuda` rasterizes on the GPU and does the rest of each step (losses, Adam, densification)
-// on the CPU, with the images and gradients crossing over every iteration, and `train --device auto` takes
-// the CPU and says why.
+// (render/cuda/, render/kernels/) renders, forward and backward, on the device, and `train --device cuda`
+// runs the whole step there (train/kernels/device_step.hpp; with --regularisers only the rasterizer, the rest
+// on the CPU). Until that step is measured on a GPU, `train --device auto` takes the CPU and says why.
 #include <memory>
 #include <string>
 #include <string_view>
@@ -44,9 +42,9 @@ const char* to_string(DeviceWork work);
 bool cuda_backend_runs(DeviceWork work);
 
 // The backend for `request` and `work`. `cuda` without a usable device is a one-line d2gs::Error
-// ("--device cuda: <why>"); `cuda` for a training step, which the backend does not run wholly, is the
-// rasterizer on the device and the rest on the CPU (the description says so). `auto` takes CUDA only
-// where the backend runs `work` wholly; else the CPU, with `reason`.
+// ("--device cuda: <why>"); `cuda` for a training step is the device-resident step (the trainer's choice,
+// by method; the description says so). `auto` takes CUDA only where cuda_backend_runs(work); else the CPU,
+// with `reason`.
 DeviceChoice choose_device(DeviceRequest request, DeviceWork work);
 
 // The rasterizer of `choice`: the CPU reference, or the CUDA backend's kernels on device 0 or in the emulator

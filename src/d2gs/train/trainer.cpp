@@ -518,8 +518,8 @@ IterationRecord Trainer::step() {
 }
 
 // step() with the model on the device: the same order, the method's hooks replaced by what its
-// device_multiplier() asks for (TrainingMethod::runs_on_device), the model brought to the host only where
-// the host needs it.
+// device_plan() asks for (TrainingMethod::runs_on_device), the model brought to the host only where the
+// host needs it.
 IterationRecord Trainer::device_step() {
   auto& s = *s_;
   const auto& cfg = s.cfg;
@@ -536,9 +536,37 @@ IterationRecord Trainer::device_step() {
   for (int c = 0; c < 3; ++c) r.composite.background[c] = s.scene.background[c];
   r.composite.clamp_pass_through = cfg.alpha_clamp_pass_through;
   r.composite.fused_multiply_add = true;  // as render::make_rasterizer's kernel rasterizer
-  const DeviceMultiplier multiplier = s.method->device_multiplier(t);
-  r.dropgaussian = multiplier.dropgaussian;
-  r.drop_rate = multiplier.rate;
+  const Camera& camera = s.scene.cameras[static_cast<std::size_t>(s.split.train[static_cast<std::size_t>(start.view)])];
+  DeviceStepPlan plan;
+  {
+    const profile::Scope p("method: device plan");
+    if (s.method->needs_host_model(t)) s.sync_host();
+    render::RenderOptions ro;
+    ro.background = s.scene.background;
+    ro.sh_degree = s.active_sh;
+    ro.alpha_clamp_pass_through = cfg.alpha_clamp_pass_through;
+    plan = s.method->device_plan(
+        MethodStep{t, start.view, camera, s.model, s.rng_dropout, *s.rasterizer, s.train_cameras, ro});
+  }
+  r.dropgaussian = plan.dropgaussian;
+  r.drop_rate = plan.rate;
+  train_kernels::ResidentDdDrop dd;
+  if (plan.dd_drop) {
+    dd.options = plan.dd;
+    dd.camera = camera;
+    dd.iteration = t;
+    dd.density = plan.density;
+    dd.density_version = plan.density_version;
+    r.dd_drop = &dd;
+  }
+  train_kernels::ResidentDafe dafe;
+  if (plan.dafe) {
+    dafe.mask = plan.dafe_mask;
+    dafe.mask_version = plan.dafe_mask_version;
+    dafe.form = plan.dafe_form;
+    dafe.weight = plan.dafe_weight;
+    r.dafe = &dafe;
+  }
   {
     const profile::Scope p("device: render, losses, backward");
     const train_kernels::ResidentLoss loss =
@@ -547,8 +575,10 @@ IterationRecord Trainer::device_step() {
     rec.l1 = loss.l1;
     rec.ssim = static_cast<float>(loss.ssim);  // as the CPU's Ssim::evaluate returns it
     rec.drop_fraction = loss.drop_fraction;
+    if (plan.dafe) rec.terms.push_back({"dafe", loss.dafe, plan.dafe_weight});
   }
   rec.loss = rec.l1 + cfg.lambda_dssim * (1.0 - rec.ssim);
+  for (const LossTerm& term : rec.terms) rec.loss += term.weight * term.value;
   if (!std::isfinite(rec.loss)) fail("iteration {}: the loss is not finite ({}); stopping", t, rec.loss);
   if (!s.resident->gradients_finite()) fail("iteration {}: non-finite gradient; stopping", t);
 

@@ -111,6 +111,59 @@ double l1_loss(Backend& backend, const float* a, const float* b, std::size_t cou
   return backend.read(sum, 0) / static_cast<double>(count);
 }
 
+// What the DAFE kernels keep in the backend's memory: the per-block partial sums and the totals.
+template <class Backend>
+struct DafeBuffers {
+  typename Backend::template Array<double> sums, masked;
+  typename Backend::template Array<DafeTotals> totals;
+};
+
+// The DAFE kernels on arrays of the backend: a and b (H x W x C, interleaved), the H x W mask, grad (if
+// non-null: += scale · d/da on the masked values); returns the loss (one value read back).
+template <class Backend>
+double dafe_loss_launch(Backend& backend, DafeBuffers<Backend>& buffers, const float* a, const float* b,
+                        const std::uint8_t* mask, int width, int height, int channels, DafeLossForm form, float* grad,
+                        float scale) {
+  const std::size_t pixels = static_cast<std::size_t>(width) * height;
+  const std::size_t values = pixels * static_cast<std::size_t>(channels);
+  if (values > (std::size_t{1} << 31) - 1) fail("DAFE kernels: {} values exceed the int32 indices", values);
+  const int n = static_cast<int>(values);
+  const int blocks = render::kernels::blocks_for(n);
+  buffers.sums.resize(static_cast<std::size_t>(blocks));
+  buffers.masked.resize(static_cast<std::size_t>(blocks));
+  buffers.totals.resize(1);
+  DafeSumArgs s;
+  s.n = n;
+  s.channels = channels;
+  s.a = a;
+  s.b = b;
+  s.mask = mask;
+  s.partial_sums = buffers.sums.data();
+  s.partial_masked = buffers.masked.data();
+  backend.template launch<DafeSumKernel>(blocks, render::kernels::kBlockThreads, s);
+  DafeTotalArgs t;
+  t.blocks = blocks;
+  t.partial_sums = buffers.sums.data();
+  t.partial_masked = buffers.masked.data();
+  t.values = static_cast<double>(pixels) * channels;
+  t.paper_form = form == DafeLossForm::Paper;
+  t.scale = scale;
+  t.totals = buffers.totals.data();
+  backend.template launch<DafeTotalKernel>(1, render::kernels::kBlockThreads, t);
+  if (grad) {
+    DafeGradArgs g;
+    g.n = n;
+    g.channels = channels;
+    g.a = a;
+    g.b = b;
+    g.mask = mask;
+    g.totals = buffers.totals.data();
+    g.grad = grad;
+    backend.template launch<DafeGradKernel>(blocks, render::kernels::kBlockThreads, g);
+  }
+  return backend.read(buffers.totals, 0).loss;
+}
+
 // dafe_loss(a, b, width, height, channels, mask, form, grad, scale): the value (a fixed-order double sum)
 // and grad += scale · d/da on the masked values.
 template <class Backend>
@@ -121,52 +174,21 @@ double dafe_loss(Backend& backend, const float* a, const float* b, int width, in
   if (width <= 0 || height <= 0 || channels <= 0) return 0.0;  // no pixels: the CPU's denominator is 0
   const std::size_t values = pixels * static_cast<std::size_t>(channels);
   if (values > (std::size_t{1} << 31) - 1) fail("DAFE kernels: {} values exceed the int32 indices", values);
-  const int n = static_cast<int>(values);
-  const int blocks = render::kernels::blocks_for(n);
   typename Backend::template Array<float> da, db, dg;
   typename Backend::template Array<std::uint8_t> dm;
-  typename Backend::template Array<double> sums, masked;
-  typename Backend::template Array<DafeTotals> totals;
+  DafeBuffers<Backend> buffers;
   backend.upload(da, a, values);
   backend.upload(db, b, values);
   backend.upload(dm, mask.data(), pixels);
-  sums.resize(static_cast<std::size_t>(blocks));
-  masked.resize(static_cast<std::size_t>(blocks));
-  totals.resize(1);
-  DafeSumArgs s;
-  s.n = n;
-  s.channels = channels;
-  s.a = da.data();
-  s.b = db.data();
-  s.mask = dm.data();
-  s.partial_sums = sums.data();
-  s.partial_masked = masked.data();
-  backend.template launch<DafeSumKernel>(blocks, render::kernels::kBlockThreads, s);
-  DafeTotalArgs t;
-  t.blocks = blocks;
-  t.partial_sums = sums.data();
-  t.partial_masked = masked.data();
-  t.values = static_cast<double>(pixels) * channels;
-  t.paper_form = form == DafeLossForm::Paper;
-  t.scale = scale;
-  t.totals = totals.data();
-  backend.template launch<DafeTotalKernel>(1, render::kernels::kBlockThreads, t);
+  if (grad) backend.upload(dg, grad, values);  // the gradient so far, which the kernel adds to
+  const double loss = dafe_loss_launch(backend, buffers, da.data(), db.data(), dm.data(), width, height, channels,
+                                       form, grad ? dg.data() : nullptr, scale);
   if (grad) {
-    backend.upload(dg, grad, values);  // the gradient so far, which the kernel adds to
-    DafeGradArgs g;
-    g.n = n;
-    g.channels = channels;
-    g.a = da.data();
-    g.b = db.data();
-    g.mask = dm.data();
-    g.totals = totals.data();
-    g.grad = dg.data();
-    backend.template launch<DafeGradKernel>(blocks, render::kernels::kBlockThreads, g);
     std::vector<float> out;
     backend.download(out, dg, values);
     std::copy(out.begin(), out.end(), grad);
   }
-  return backend.read(totals, 0).loss;
+  return loss;
 }
 
 }  // namespace d2gs::train_kernels

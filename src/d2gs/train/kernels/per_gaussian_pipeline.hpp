@@ -158,6 +158,15 @@ public:
     if (n == 0) return;
     backend_.upload(means_, model.means.data(), 3 * n);
     backend_.upload(density_, density_score.data(), n);
+    probabilities_of(means_.data(), density_.data(), n, camera, options, iteration);
+  }
+
+  // The same from arrays of the backend: the n means (n x 3) and density scores.
+  void probabilities_of(const float* means, const float* density_score, std::size_t n, const Camera& camera,
+                        const DdDropOptions& options, int iteration) {
+    if (n > static_cast<std::size_t>(1u << 31) - 1) fail("DD-Drop kernels: {} Gaussians exceed int32", n);
+    n_ = n;
+    if (n == 0) return;
     depth_.resize(n);
     keys_.resize(n);
     keys_sorted_.resize(n);
@@ -166,7 +175,7 @@ public:
     probabilities_.resize(n);
     GaussianDepthArgs d;
     d.n = static_cast<int>(n);
-    d.means = means_.data();
+    d.means = means;
     d.euclidean = options.depth_mode == DepthMode::Euclidean;
     const glm::dvec3 c = camera.center_world();
     const glm::dvec3 axis = camera.R_world_to_cam[2];  // glm is column-major: the third column
@@ -186,11 +195,14 @@ public:
     p.sorted_keys = keys_sorted_.data();
     p.near_rank = static_cast<int>(tertile_rank(static_cast<long long>(n), kNearTertile));
     p.far_rank = static_cast<int>(tertile_rank(static_cast<long long>(n), kFarTertile));
-    p.density_score = density_.data();
+    p.density_score = density_score;
     p.terms = dd_drop_terms(options, iteration);
     p.probabilities = probabilities_.data();
     render::kernels::launch_per_item<DdDropProbabilityKernel>(backend_, n, p);
   }
+
+  // The probabilities of the last call, in the backend's memory (n values).
+  const float* device_probabilities() { return probabilities_.data(); }
 
   // The probabilities of the last probabilities() call.
   std::vector<float> download() {

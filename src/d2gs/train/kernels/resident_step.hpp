@@ -90,15 +90,18 @@ public:
     if (r.camera.width != gt.width || r.camera.height != gt.height)
       fail("resident step: the render ({}x{}) and training view {} ({}x{}) differ in size", r.camera.width,
            r.camera.height, view, gt.width, gt.height);
+    if (r.dropgaussian && r.dd_drop) fail("resident step: two opacity multipliers in one step");
     if (r.dropgaussian) {
       if (!(r.drop_rate >= 0.0 && r.drop_rate < 1.0)) fail("DropGaussian: rate {} outside [0, 1)", r.drop_rate);
       stages_.multiplier().resize(n_);
       dropout_mask_into(backend(), mask_buffers_, n_, nullptr, r.drop_rate, false, dropout_rng,
                         stages_.multiplier().data());
     }
+    if (r.dd_drop) dd_drop_mask(*r.dd_drop, dropout_rng);
+    const bool with_multiplier = r.dropgaussian || r.dd_drop;
     ResidentLoss loss;
-    if (r.dropgaussian && n_ > 0) loss.drop_fraction = zeros(stages_.multiplier(), n_) / static_cast<double>(n_);
-    stages_.forward_resident(n_, sh_degree_, r.dropgaussian, r.camera, r.stages);
+    if (with_multiplier && n_ > 0) loss.drop_fraction = zeros(stages_.multiplier(), n_) / static_cast<double>(n_);
+    stages_.forward_resident(n_, sh_degree_, with_multiplier, r.camera, r.stages);
     stages_.composite_resident(r.composite);
     const std::size_t values = static_cast<std::size_t>(gt.width) * gt.height * 3;
     const int count = static_cast<int>(values);
@@ -115,6 +118,7 @@ public:
     loss.ssim = ssim_.evaluate_on(pred_.data(), gt.b.data(), gt.mu_b.data(), gt.s_bb.data(), gt.width, gt.height, 3,
                                   grad, -lambda_dssim);
     loss.l1 = backend().read(l1_sum_, 0) / static_cast<double>(values);
+    if (r.dafe) loss.dafe = dafe(view, *r.dafe, grad);
     ClampGradientArgs g;
     g.n = count;
     g.rgb = rgb;
@@ -187,6 +191,9 @@ private:
   struct View {
     int width = 0, height = 0;
     Array<float> rgb, b, mu_b, s_bb;
+    Array<std::uint8_t> mask;  // DAFE's, once uploaded
+    bool mask_uploaded = false;
+    std::uint64_t mask_version = 0;
   };
   // Model-shaped arrays of the moments.
   struct Moments {
@@ -216,6 +223,41 @@ private:
     backend().download(g.opacity_logits, a.opacity_logits, n_);
     backend().download(g.sh_dc, a.sh_dc, n_ * 3);
     backend().download(g.sh_rest, a.sh_rest, rest_values());
+  }
+
+  // DD-Drop's probabilities from the model's means on the device and the density scores (uploaded when
+  // their version changed), then the Bernoulli mask into the stages' multiplier.
+  void dd_drop_mask(const ResidentDdDrop& d, Rng& rng) {
+    if (!d.density || d.density->size() != n_)
+      fail("DD-Drop: {} density scores for {} Gaussians", d.density ? d.density->size() : 0, n_);
+    if (!density_uploaded_ || d.density_version != density_version_ || density_count_ != n_) {
+      backend().upload(density_, d.density->data(), n_);
+      density_uploaded_ = true;
+      density_version_ = d.density_version;
+      density_count_ = n_;
+    }
+    dd_drop_.probabilities_of(stages_.model().means.data(), density_.data(), n_, d.camera, d.options, d.iteration);
+    stages_.multiplier().resize(n_);
+    if (n_ > 0)
+      dropout_mask_into(backend(), mask_buffers_, n_, dd_drop_.device_probabilities(), 0.0, d.options.compensate, rng,
+                        stages_.multiplier().data());
+  }
+
+  // The DAFE term of `view` on pred_ against its image, weight · its gradient added to grad; the masks of
+  // every view uploaded when their version changed.
+  double dafe(std::size_t view, const ResidentDafe& d, float* grad) {
+    if (!d.mask) fail("DAFE: no mask");
+    View& v = views_[view];
+    const std::size_t pixels = static_cast<std::size_t>(v.width) * v.height;
+    if (d.mask->empty()) return 0.0;  // no mask yet: the CPU's term is 0 too
+    if (d.mask->size() != pixels) fail("DAFE: mask has {} pixels, image {}x{}", d.mask->size(), v.width, v.height);
+    if (!v.mask_uploaded || v.mask_version != d.mask_version) {
+      backend().upload(v.mask, d.mask->data(), pixels);
+      v.mask_uploaded = true;
+      v.mask_version = d.mask_version;
+    }
+    return dafe_loss_launch(backend(), dafe_buffers_, pred_.data(), v.rgb.data(), v.mask.data(), v.width, v.height, 3,
+                            d.form, grad, d.weight);
   }
 
   // The number of zeros among the first n values of `values`.
@@ -258,6 +300,12 @@ private:
   Stages stages_;
   SsimPipeline<Backend> ssim_;
   DropoutMaskBuffers<Backend> mask_buffers_;
+  DdDropPipeline<Backend> dd_drop_{stages_.backend()};
+  DafeBuffers<Backend> dafe_buffers_;
+  Array<float> density_;
+  bool density_uploaded_ = false;
+  std::uint64_t density_version_ = 0;
+  std::size_t density_count_ = 0;
   std::vector<View> views_;
   Moments m1_, m2_;
   Array<float> grad_sum_, grad_count_, pred_, ndc_;

@@ -101,7 +101,47 @@ public:
     return {{"dafe", value, dafe_.lambda}};
   }
 
+  // The device's step: the same refresh and self-prior on the host model, the probabilities, the mask and
+  // DAFE on the device (the scores and masks uploaded when they change).
+  bool runs_on_device() const override { return true; }
+  bool needs_host_model(int t) const override {
+    return t == 1 || t % dd_.density_refresh_every == 0 || density_.empty() ||
+           (dafe_.enabled && dafe_.prior.empty() && t == kSelfPriorIteration);
+  }
+  DeviceStepPlan device_plan(const MethodStep& step) override {
+    prepare(step);
+    const int t = step.iteration;
+    const std::size_t n = step.model.size();
+    if (t == 1 || t % dd_.density_refresh_every == 0 || density_.empty()) {
+      density_ = density_scores(step.model);
+      ++density_version_;
+    }
+    DeviceStepPlan plan;
+    plan.dd_drop = true;
+    plan.dd = dd_;
+    if (density_.size() == n) {
+      plan.density = &density_;
+    } else {  // the release's cache out of step (as opacity_multiplier)
+      if (out_of_step_version_ != density_version_ || out_of_step_.size() != n) {
+        out_of_step_ = density_.size() < n ? std::vector<float>(n, 0.5f)
+                                           : std::vector<float>(density_.begin(), density_.begin() + static_cast<std::ptrdiff_t>(n));
+        out_of_step_version_ = density_version_;
+      }
+      plan.density = &out_of_step_;
+    }
+    plan.density_version = density_version_;
+    if (dafe_.enabled) {
+      plan.dafe = true;
+      plan.dafe_mask = &masks_[static_cast<std::size_t>(step.view)];
+      plan.dafe_mask_version = masks_version_;
+      plan.dafe_form = dafe_.loss_form;
+      plan.dafe_weight = dafe_.lambda;
+    }
+    return plan;
+  }
+
   void after_densify(const DensifyReport& report) override {
+    ++density_version_;  // the model's size changed: the scores (or the out-of-step cache) change with it
     if (dd_.release_density_cache || density_.empty()) return;
     std::vector<float> carried(report.source.size());
     for (std::size_t i = 0; i < carried.size(); ++i) carried[i] = density_[report.source[i]];
@@ -119,10 +159,13 @@ public:
     if (const auto it = s.floats.find(kDensityCache); it != s.floats.end() && !it->second.empty())
       density_ = std::move(it->second.front());
     if (const auto it = s.bytes.find(kDafeMasks); it != s.bytes.end() && !it->second.empty()) masks_ = std::move(it->second);
+    ++density_version_;
+    ++masks_version_;
   }
 
 private:
   void load_priors(const MethodRun& run) {
+    ++masks_version_;
     // Depth priors mark pixels without a depth by 0 (d2gs init's stereo depth maps): never far, and
     // never averaged into the valid depths when the map is resized (PatchMatch's maps are at the scene
     // folder's highest resolution).
@@ -138,6 +181,7 @@ private:
   }
 
   void make_self_priors(const MethodStep& step) {
+    ++masks_version_;
     render::RenderOptions ro;
     ro.background = step.render_options.background;
     ro.sh_degree = step.render_options.sh_degree;
@@ -160,6 +204,9 @@ private:
   std::vector<float> density_;                    // density scores (out of step with the model in the release mode)
   std::vector<std::vector<std::uint8_t>> masks_;  // far-region mask per training view (empty: none yet)
   std::vector<float> probabilities_, multiplier_;  // per-iteration buffers
+  // The device's step: versions of the scores and masks (its uploads follow them), the out-of-step cache.
+  std::uint64_t density_version_ = 0, masks_version_ = 0, out_of_step_version_ = ~std::uint64_t{0};
+  std::vector<float> out_of_step_;
 };
 
 }  // namespace

@@ -17,8 +17,11 @@ public:
   }
   // The same mask drawn on the device from the same stream (train/kernels/dropout_kernels.hpp).
   bool runs_on_device() const override { return true; }
-  DeviceMultiplier device_multiplier(int iteration) const override {
-    return {true, dropgaussian_rate(iteration, iterations_, max_rate_)};
+  DeviceStepPlan device_plan(const MethodStep& step) override {
+    DeviceStepPlan plan;
+    plan.dropgaussian = true;
+    plan.rate = dropgaussian_rate(step.iteration, iterations_, max_rate_);
+    return plan;
   }
 
 private:

@@ -81,11 +81,23 @@ struct MethodLoss {
   float* grad_alpha = nullptr;
 };
 
-// What the device-resident step (--device cuda|emulated, train/kernels/device_step.hpp) draws as an
-// iteration's opacity multiplier: DropGaussian's uniform dropout at `rate`, or none.
-struct DeviceMultiplier {
+// What the device-resident step (--device cuda|emulated, train/kernels/device_step.hpp) does for a method in
+// one iteration, in place of its hooks: the opacity multiplier (none, DropGaussian's uniform dropout at
+// `rate`, or DD-Drop's from `dd` and the density scores) and the DAFE term on this view's mask. The vectors
+// belong to the method and stay valid until its next hook; the device uploads one again only when its
+// version changed.
+struct DeviceStepPlan {
   bool dropgaussian = false;
   double rate = 0.0;
+  bool dd_drop = false;
+  DdDropOptions dd;
+  const std::vector<float>* density = nullptr;  // the model's size
+  std::uint64_t density_version = 0;
+  bool dafe = false;
+  const std::vector<std::uint8_t>* dafe_mask = nullptr;  // this view's H×W far-region mask; empty: no term yet
+  std::uint64_t dafe_mask_version = 0;                   // of every view's masks
+  DafeLossForm dafe_form = DafeLossForm::Release;
+  float dafe_weight = 0.0f;
 };
 
 // A term of the loss: loss += weight · value; logged under `name` (train_log.jsonl).
@@ -136,12 +148,16 @@ public:
   virtual void after_densify(const DensifyReport& /*report*/) {}
 
   // ---- the device-resident step ----
-  // Whether the device's step can stand in for every per-iteration hook of this method (prepare,
-  // opacity_multiplier, loss_terms, before_update: then none of them is called, and device_multiplier()
-  // says what the device draws instead). false (the default): with --device cuda|emulated the trainer keeps
-  // the hooks on the host and runs only the rasterizer on the device. after_densify() is called either way.
+  // Whether the device's step can stand in for this method's per-iteration hooks (prepare,
+  // opacity_multiplier, loss_terms: then none of them is called, device_plan() says what the device does
+  // instead, and the method has no before_update()). false (the default): with --device cuda|emulated the
+  // trainer keeps the hooks on the host and runs only the rasterizer on the device. after_densify() is
+  // called either way.
   virtual bool runs_on_device() const { return false; }
-  virtual DeviceMultiplier device_multiplier(int /*iteration*/) const { return {}; }
+  // Whether device_plan() of iteration t reads step.model's values (the trainer then brings the model to
+  // the host first; otherwise step.model has the model's size but values as of its last copy).
+  virtual bool needs_host_model(int /*iteration*/) const { return false; }
+  virtual DeviceStepPlan device_plan(const MethodStep& /*step*/) { return {}; }
 
   // ---- checkpoints ----
   virtual MethodState state() const { return {}; }
