@@ -77,18 +77,7 @@ public:
 
   const ForwardStages& forward(const cpu::ModelView<float>& model, const float* opacity_multiplier,
                                const CameraParams<float>& camera, const StageOptions& options) override {
-    if (model.sh_degree < 0 || model.sh_degree > 3) fail("stages: model SH degree {} is outside 0..3", model.sh_degree);
-    if (options.active_degree < 0 || options.active_degree > model.sh_degree)
-      fail("stages: active SH degree {} is outside 0..{}", options.active_degree, model.sh_degree);
-    if (camera.width <= 0 || camera.height <= 0) fail("stages: camera size {}x{} is empty", camera.width, camera.height);
-    n_ = model.count;
-    if (n_ > static_cast<std::size_t>(1) << 30) fail("stages: {} Gaussians exceed the int32 indices", n_);
-    has_model_ = true;
-    composited_ = composite_grads_ = false;
-    rest_count_ = model.sh_rest_count();
-    camera_ = camera;
-    options_ = options;
-    has_multiplier_ = opacity_multiplier != nullptr;
+    begin_forward(model.count, model.sh_degree, opacity_multiplier != nullptr, camera, options);
     const UploadedModel uploaded{model.means, model.log_scales, model.quats, model.opacity_logits, model.sh_dc,
                                  model.sh_rest, opacity_multiplier, n_, rest_count_};
     if (!timing_ || !(uploaded == uploaded_)) {
@@ -206,6 +195,23 @@ private:
     c.tile_ranges = ranges_.data();
     for (int k = 0; k < 3; ++k) c.background[k] = composite_options_.background[k];
     return c;
+  }
+
+  // The checks and the state of a forward (host or resident) of n Gaussians of SH degree sh_degree.
+  void begin_forward(std::size_t n, int sh_degree, bool with_multiplier, const CameraParams<float>& camera,
+                     const StageOptions& options) {
+    if (sh_degree < 0 || sh_degree > 3) fail("stages: model SH degree {} is outside 0..3", sh_degree);
+    if (options.active_degree < 0 || options.active_degree > sh_degree)
+      fail("stages: active SH degree {} is outside 0..{}", options.active_degree, sh_degree);
+    if (camera.width <= 0 || camera.height <= 0) fail("stages: camera size {}x{} is empty", camera.width, camera.height);
+    if (n > static_cast<std::size_t>(1) << 30) fail("stages: {} Gaussians exceed the int32 indices", n);
+    n_ = n;
+    rest_count_ = (sh_degree + 1) * (sh_degree + 1) - 1;
+    has_model_ = true;
+    composited_ = composite_grads_ = false;
+    camera_ = camera;
+    options_ = options;
+    has_multiplier_ = with_multiplier;
   }
 
   // The launches of forward(): projection, SH, tile intersection of the n_ Gaussians in means_ ... with
@@ -450,18 +456,7 @@ public:
 
   void forward_resident(std::size_t n, int sh_degree, bool with_multiplier, const CameraParams<float>& camera,
                         const StageOptions& options) {
-    if (sh_degree < 0 || sh_degree > 3) fail("stages: model SH degree {} is outside 0..3", sh_degree);
-    if (options.active_degree < 0 || options.active_degree > sh_degree)
-      fail("stages: active SH degree {} is outside 0..{}", options.active_degree, sh_degree);
-    if (camera.width <= 0 || camera.height <= 0) fail("stages: camera size {}x{} is empty", camera.width, camera.height);
-    if (n > static_cast<std::size_t>(1) << 30) fail("stages: {} Gaussians exceed the int32 indices", n);
-    n_ = n;
-    rest_count_ = (sh_degree + 1) * (sh_degree + 1) - 1;
-    has_model_ = true;
-    composited_ = composite_grads_ = false;
-    camera_ = camera;
-    options_ = options;
-    has_multiplier_ = with_multiplier;
+    begin_forward(n, sh_degree, with_multiplier, camera, options);
     uploaded_ = UploadedModel{};  // the arrays no longer hold an upload of timing mode's
     launch_forward();
   }

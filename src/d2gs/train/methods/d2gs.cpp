@@ -78,14 +78,9 @@ public:
   OpacityMultiplier opacity_multiplier(const MethodStep& step) override {
     const int t = step.iteration;
     const std::size_t n = step.model.size();
-    if (t == 1 || t % dd_.density_refresh_every == 0 || density_.empty()) density_ = density_scores(step.model);
-    // The cache has the model's size except with the release's cache behaviour, where it is out of step
-    // after densification: every score 0.5 when the model grew, the first N cached scores when it shrank.
+    if (refreshes_density(t)) density_ = density_scores(step.model);
     std::vector<float> out_of_step;
-    if (density_.size() != n) {
-      out_of_step = density_.size() < n ? std::vector<float>(n, 0.5f)
-                                        : std::vector<float>(density_.begin(), density_.begin() + static_cast<std::ptrdiff_t>(n));
-    }
+    if (density_.size() != n) out_of_step = out_of_step_scores(n);
     const std::vector<float>& density = density_.size() == n ? density_ : out_of_step;
     probabilities_ = dd_drop_probabilities(gaussian_depths(step.model, step.camera, dd_.depth_mode), density, dd_, t);
     bernoulli_mask(probabilities_, step.rng, multiplier_, dd_.compensate);
@@ -105,14 +100,13 @@ public:
   // DAFE on the device (the scores and masks uploaded when they change).
   bool runs_on_device() const override { return true; }
   bool needs_host_model(int t) const override {
-    return t == 1 || t % dd_.density_refresh_every == 0 || density_.empty() ||
-           (dafe_.enabled && dafe_.prior.empty() && t == kSelfPriorIteration);
+    return refreshes_density(t) || (dafe_.enabled && dafe_.prior.empty() && t == kSelfPriorIteration);
   }
   DeviceStepPlan device_plan(const MethodStep& step) override {
     prepare(step);
     const int t = step.iteration;
     const std::size_t n = step.model.size();
-    if (t == 1 || t % dd_.density_refresh_every == 0 || density_.empty()) {
+    if (refreshes_density(t)) {
       density_ = density_scores(step.model);
       ++density_version_;
     }
@@ -123,8 +117,7 @@ public:
       plan.density = &density_;
     } else {  // the release's cache out of step (as opacity_multiplier)
       if (out_of_step_version_ != density_version_ || out_of_step_.size() != n) {
-        out_of_step_ = density_.size() < n ? std::vector<float>(n, 0.5f)
-                                           : std::vector<float>(density_.begin(), density_.begin() + static_cast<std::ptrdiff_t>(n));
+        out_of_step_ = out_of_step_scores(n);
         out_of_step_version_ = density_version_;
       }
       plan.density = &out_of_step_;
@@ -164,6 +157,15 @@ public:
   }
 
 private:
+  // Whether iteration t computes the density scores afresh (on the model before its render).
+  bool refreshes_density(int t) const { return t == 1 || t % dd_.density_refresh_every == 0 || density_.empty(); }
+  // The cache has the model's size except with the release's cache behaviour, where it is out of step
+  // after densification: every score 0.5 when the model grew to n, the first n cached scores when it shrank.
+  std::vector<float> out_of_step_scores(std::size_t n) const {
+    return density_.size() < n ? std::vector<float>(n, 0.5f)
+                               : std::vector<float>(density_.begin(), density_.begin() + static_cast<std::ptrdiff_t>(n));
+  }
+
   void load_priors(const MethodRun& run) {
     ++masks_version_;
     // Depth priors mark pixels without a depth by 0 (d2gs init's stereo depth maps): never far, and
