@@ -121,8 +121,6 @@ nlohmann::ordered_json backend_json() {
   j["cpu_tile_levels"] = render::cpu::available_tile_isas();
   j["cuda_devices"] = cuda::device_count();
   j["cuda_device"] = cuda::describe_device();
-  j["cuda_runs"] = {{"render", render::cuda_backend_runs(render::DeviceWork::Render)},
-                    {"train", render::cuda_backend_runs(render::DeviceWork::Train)}};
   return j;
 }
 

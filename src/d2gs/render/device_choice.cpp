@@ -42,13 +42,6 @@ const char* to_string(Device device) {
   return "?";
 }
 
-const char* to_string(DeviceWork work) { return work == DeviceWork::Render ? "rendering" : "a training step"; }
-
-// Rendering: projection, SH, tile intersection and compositing, forward and backward, are kernels. A training
-// step runs wholly on the device (train/kernels/device_step.hpp; with --regularisers only the rasterizer),
-// but its speed and parity on a GPU are not yet measured, so `auto` keeps training on the CPU until they are.
-bool cuda_backend_runs(DeviceWork work) { return work == DeviceWork::Render; }
-
 std::string describe_cpu_backend() {
 #ifdef _OPENMP
   const int threads = omp_get_max_threads();
@@ -69,20 +62,16 @@ DeviceChoice choose_device(DeviceRequest request, DeviceWork work) {
                 : "the CUDA backend's kernels emulated on the CPU: the whole training step, or with "
                   "--regularisers the rasterizer (their hooks on the CPU) (slow: for checking the kernels)",
             ""};
-  // Why CUDA cannot be used, or empty when it can.
-  std::string why;
-  if (cuda::device_count() == 0)
-    why = cuda::describe_device();  // "no CUDA device: ...", "this d2gs was built without CUDA"
-  else if (!cuda_backend_runs(work))
-    why = fmt::format("{} found, but the CUDA backend does not yet run {} (docs/architecture.md)",
-                      cuda::describe_device(), to_string(work));
-  if (why.empty()) return {Device::Cuda, "CUDA " + cuda::describe_device(), ""};
-  if (request == DeviceRequest::Cuda && cuda::device_count() > 0)  // a training step, asked for by name
+  // Rendering and a training step both run on the device (render/kernels/kernel_rasterizer.hpp,
+  // train/kernels/device_step.hpp); with --regularisers a step rasterizes there and runs their hooks here.
+  if (cuda::device_count() > 0)
     return {Device::Cuda,
             "CUDA " + cuda::describe_device() +
-                ": the whole training step, or with --regularisers the rasterizer (their hooks on the CPU; "
-                "issue 27)",
+                (work == DeviceWork::Train
+                     ? ": the whole training step, or with --regularisers the rasterizer (their hooks on the CPU)"
+                     : ""),
             ""};
+  const std::string why = cuda::describe_device();  // "no CUDA device: ...", "this d2gs was built without CUDA"
   if (request == DeviceRequest::Cuda) fail("--device cuda: {}; use --device cpu or auto", why);
   cpu_choice.reason = why;
   return cpu_choice;

@@ -3,7 +3,7 @@
 // `d2gs info` reports. The CPU backend is the reference and runs everything. The CUDA backend
 // (render/cuda/, render/kernels/) renders, forward and backward, on the device, and `train --device cuda`
 // runs the whole step there (train/kernels/device_step.hpp; with --regularisers only the rasterizer, the rest
-// on the CPU). Until that step is measured on a GPU, `train --device auto` takes the CPU and says why.
+// on the CPU). `auto` takes CUDA for both wherever a device exists; without one, the CPU, and says why.
 #include <memory>
 #include <string>
 #include <string_view>
@@ -34,17 +34,11 @@ struct DeviceChoice {
 // What a command runs on the backend: rendering (d2gs render, eval: the rasterizer's forward) or
 // training steps (d2gs train).
 enum class DeviceWork { Render, Train };
-const char* to_string(DeviceWork work);
-
-// Whether the CUDA backend runs `work` wholly on the device: rendering yes (every stage of the rasterizer
-// is a kernel), a training step not yet (issue 27). Where it does, `auto` chooses CUDA wherever a device
-// exists.
-bool cuda_backend_runs(DeviceWork work);
 
 // The backend for `request` and `work`. `cuda` without a usable device is a one-line d2gs::Error
-// ("--device cuda: <why>"); `cuda` for a training step is the device-resident step (the trainer's choice,
-// by method; the description says so). `auto` takes CUDA only where cuda_backend_runs(work); else the CPU,
-// with `reason`.
+// ("--device cuda: <why>"). `auto` takes CUDA wherever a device exists, else the CPU with `reason`. On
+// CUDA a training step is the device-resident step (with --regularisers the rasterizer alone; the trainer's
+// choice, by method; the description says so).
 DeviceChoice choose_device(DeviceRequest request, DeviceWork work);
 
 // The rasterizer of `choice`: the CPU reference, or the CUDA backend's kernels on device 0 or in the emulator
