@@ -109,7 +109,7 @@ TEST(ExperimentConfig, SceneTrainKeysApplyToThatScenesRunsOnly) {
   const auto file = test::source_dir() / "configs/experiments/llff_levers.json";
   const ExperimentConfig c = load_experiment_config(file, test::shared_data().string());
   const auto runs = expand_runs(c, out_dir("levers"));
-  ASSERT_EQ(runs.size(), 3u * 8u * 3u);
+  ASSERT_EQ(runs.size(), 3u * 9u * 3u);
   for (const auto& r : runs) {
     EXPECT_EQ(r.train_config["resolution"], r.scene == "fern" ? 8 : 2) << r.id();
     EXPECT_EQ(r.train_config["iterations"], 10000) << r.id();  // the experiment's "train"

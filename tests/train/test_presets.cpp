@@ -1,5 +1,7 @@
 #include <gtest/gtest.h>
 
+#include <nlohmann/json.hpp>
+
 #include "d2gs/core/error.hpp"
 #include "d2gs/train/presets.hpp"
 
@@ -30,6 +32,31 @@ TEST(Presets, PaperAndRelease) {
   EXPECT_DOUBLE_EQ(c.dafe.tau, 5.0);
   EXPECT_EQ(c.dafe.loss_form, DafeLossForm::Paper);
   EXPECT_THROW(apply_d2gs_preset(c, "best"), Error);
+}
+
+// "plus" is the release with exactly three things changed: compensation per Gaussian, opacity decay
+// among the regularisers (once, however often the preset is applied), and no opacity reset.
+TEST(Presets, PlusIsTheReleaseWithCompensationAndDecay) {
+  TrainConfig plus;
+  plus.dd_drop.weight_depth = 0.9;  // a value the release restores
+  plus.dd_drop.depth_mode = DepthMode::Euclidean;
+  apply_d2gs_preset(plus, "plus");
+  apply_d2gs_preset(plus, "plus");
+  TrainConfig expected;
+  apply_d2gs_preset(expected, "release");
+  EXPECT_FALSE(expected.dd_drop.compensate);
+  EXPECT_FALSE(expected.opacity_reset_at.empty());
+  expected.dd_drop.compensate = true;
+  expected.regularisers = {"opacity-decay"};
+  expected.opacity_reset_at.clear();
+  nlohmann::json a, b;
+  to_json(a, plus);
+  to_json(b, expected);
+  EXPECT_EQ(a, b) << a.dump(1) << "\n" << b.dump(1);
+  TrainConfig noisy;
+  noisy.regularisers = {"opacity-noise"};
+  apply_d2gs_preset(noisy, "plus");  // a regulariser chosen before stays, in front
+  EXPECT_EQ(noisy.regularisers, (std::vector<std::string>{"opacity-noise", "opacity-decay"}));
 }
 
 TEST(Presets, SceneValuesOfTheRelease) {

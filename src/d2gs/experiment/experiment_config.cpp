@@ -160,8 +160,8 @@ ExperimentConfig parse_experiment_config(const nlohmann::json& j, const fs::path
     const std::string where = "method " + spec.label();
     if (!labels.insert(spec.label()).second) fail_file(file, "method '{}' appears twice (give it a variant)", spec.label());
     spec.preset = get<std::string>(m, "preset", "", file, where);
-    if (!spec.preset.empty() && spec.preset != "paper" && spec.preset != "release")
-      fail_file(file, "{}: preset must be 'paper' or 'release' (got '{}')", where, spec.preset);
+    if (!spec.preset.empty() && spec.preset != "paper" && spec.preset != "release" && spec.preset != "plus")
+      fail_file(file, "{}: preset must be 'paper', 'release' or 'plus' (got '{}')", where, spec.preset);
     if (m.contains("scene_preset")) {
       if (m["scene_preset"].is_boolean()) spec.use_scene_preset = m["scene_preset"].get<bool>();
       else if (m["scene_preset"].is_string()) spec.scene_preset = m["scene_preset"].get<std::string>();

@@ -74,7 +74,7 @@ struct TrainConfig {
   // D²GS: DD-Drop and DAFE (presets.hpp sets groups of these; the names are kept for the record).
   // The defaults are the release preset's values, chosen by measurement on fern (docs/training.md, "Which
   // D²GS preset"); --preset paper switches to the paper's formulas and constants.
-  std::string preset;        // "paper", "release" or empty (= the defaults, i.e. the release's values)
+  std::string preset;        // "paper", "release", "plus" or empty (= the defaults, i.e. the release's values)
   std::string scene_preset;  // e.g. "llff/fern", or empty
   DdDropOptions dd_drop = {.weight_depth = 0.3, .weight_density = 0.7, .depth_mode = DepthMode::ReleaseDot,
                            .release_density_cache = true};

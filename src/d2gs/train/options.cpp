@@ -423,10 +423,11 @@ std::vector<TrainOption> declare() {
   // ---- D²GS ----
   t.push_back(choice({"preset", dd_drop,
                       "D²GS preset: 'paper' (the paper's formulas and constants) or 'release' (the authors' code, "
-                      "quirks included; its values are the defaults, chosen by measurement: docs/training.md); "
+                      "quirks included; its values are the defaults, chosen by measurement: docs/training.md) or 'plus' "
+                      "(the release with compensation per Gaussian and opacity decay in place of the opacity reset); "
                       "applied over --config, and flags override it"},
                      [](auto& c) -> auto& { return c.preset; },
-                     {{"", ""}, {"paper", "paper"}, {"release", "release"}}));
+                     {{"", ""}, {"paper", "paper"}, {"release", "release"}, {"plus", "plus"}}));
   t.push_back(text({"scene_preset", dd_drop,
                     "D²GS per-scene values of the release, e.g. fern, llff/room, mipnerf360/bicycle (weights, rates, "
                     "far-mask %, DAFE weight); applied after --preset"},

@@ -1,5 +1,7 @@
 #include "d2gs/train/presets.hpp"
 
+#include <algorithm>
+
 #include <nlohmann/json.hpp>
 
 #include "d2gs/core/error.hpp"
@@ -44,8 +46,16 @@ void apply_d2gs_preset(TrainConfig& c, const std::string& preset) {
     c.dd_drop.rate_max = d.dd_drop.rate_max;
     c.dafe.mask_rule = d.dafe.mask_rule;
     c.dafe.loss_form = d.dafe.loss_form;
+  } else if (preset == "plus") {
+    // The release, with the two weight-free levers that won issue 25's screen together: each kept
+    // Gaussian's opacity divided by (1 − p_i), and opacity decay in place of the opacity reset.
+    apply_d2gs_preset(c, "release");
+    c.dd_drop.compensate = true;
+    if (std::find(c.regularisers.begin(), c.regularisers.end(), "opacity-decay") == c.regularisers.end())
+      c.regularisers.push_back("opacity-decay");
+    c.opacity_reset_at.clear();
   } else {
-    fail("unknown D2GS preset '{}' (expected paper or release)", preset);
+    fail("unknown D2GS preset '{}' (expected paper, release or plus)", preset);
   }
 }
 

@@ -23,6 +23,8 @@ const std::vector<D2gsScenePreset>& d2gs_scene_presets();
 //   far mask 5 %, DAFE loss normalised by the mask area, λ_DAFE = 1.
 // "release": depth x·R_w2c[:,2], the release's density cache, w_d 0.3, w_ρ 0.7, r 0.05 → 0.3,
 //   DAFE loss averaged over all C·H·W values.
+// "plus": the release, plus DropGaussian's compensation per Gaussian (kept opacity ÷ (1 − p_i)) and
+//   opacity decay (regulariser "opacity-decay") without the opacity reset; issue 25, docs/training.md.
 // Throws d2gs::Error for another name.
 void apply_d2gs_preset(TrainConfig& config, const std::string& preset);
 
