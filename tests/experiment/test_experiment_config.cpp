@@ -150,6 +150,11 @@ TEST(ExperimentConfig, BadFilesAreOneLineErrorsNamingTheFile) {
   expect_error(R"({"views": [3], "methods": [{"method": "3dgs"}]})", "'scenes' must be a non-empty array");
   expect_error("{" + scenes + R"(, "methods": [{"method": "nerf"}]})", "unknown method 'nerf'");
   expect_error("{" + scenes + R"(, "methods": [{"method": "3dgs"}, {"method": "3dgs"}]})", "appears twice");
+  expect_error("{" + scenes + R"(, "methods": [{"method": "d2gs", "preset": "best"}]})",
+               "preset must be one of paper, release, plus (got 'best')");
+  // A D²GS preset on another method would change (plus) or pretend to change (paper, release) it.
+  expect_error("{" + scenes + R"(, "methods": [{"method": "dropgaussian", "preset": "plus"}]})",
+               "preset 'plus' is a D2GS preset, but the method is dropgaussian");
   expect_error("{" + scenes + R"(, "methods": [{"method": "3dgs", "variant": "a/b"}]})", "variant name 'a/b'");
   expect_error("{" + scenes + R"(, "methods": [{"method": "3dgs"}], "train": {"seed": 3}})",
                "sets 'seed', which the experiment sets");

@@ -59,6 +59,48 @@ TEST(Presets, PlusIsTheReleaseWithCompensationAndDecay) {
   EXPECT_EQ(noisy.regularisers, (std::vector<std::string>{"opacity-noise", "opacity-decay"}));
 }
 
+// Every name --preset lists applies; the command line refuses a D²GS preset for another method
+// (plus would switch on opacity decay and drop the reset of DropGaussian's training).
+TEST(Presets, NamesApplyAndOnlyToD2gs) {
+  EXPECT_EQ(d2gs_preset_names(), (std::vector<std::string>{"paper", "release", "plus"}));
+  for (const std::string& name : d2gs_preset_names()) {
+    TrainConfig c;
+    c.method = "d2gs";
+    EXPECT_NO_THROW(apply_given_options(c, {{"preset", name}})) << name;
+    EXPECT_EQ(c.preset, name);
+    for (const char* other : {"3dgs", "dropgaussian"}) {
+      TrainConfig o;
+      o.method = other;
+      const TrainConfig before = o;
+      try {
+        apply_given_options(o, {{"preset", name}});
+        ADD_FAILURE() << "--preset " << name << " accepted for " << other;
+      } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("is a D2GS preset, but the method is " + std::string(other)),
+                  std::string::npos)
+            << e.what();
+      }
+      nlohmann::json a, b;
+      to_json(a, o);
+      to_json(b, before);
+      EXPECT_EQ(a, b) << "a refused preset changed the config";
+    }
+    // The method given on the same command line counts, whatever the config held before.
+    TrainConfig switched;
+    switched.method = "dropgaussian";
+    EXPECT_NO_THROW(apply_given_options(switched, {{"method", "d2gs"}, {"preset", name}}));
+    EXPECT_THROW(apply_given_options(c, {{"method", "3dgs"}, {"preset", name}}), Error);
+  }
+  TrainConfig c;
+  c.method = "d2gs";
+  try {
+    apply_given_options(c, {{"preset", "best"}});
+    ADD_FAILURE() << "an unknown preset was accepted";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("expected one of: paper, release, plus"), std::string::npos) << e.what();
+  }
+}
+
 TEST(Presets, SceneValuesOfTheRelease) {
   TrainConfig c;
   apply_scene_preset(c, "fern");

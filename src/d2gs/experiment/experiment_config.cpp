@@ -6,6 +6,7 @@
 #include <type_traits>
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
@@ -160,8 +161,13 @@ ExperimentConfig parse_experiment_config(const nlohmann::json& j, const fs::path
     const std::string where = "method " + spec.label();
     if (!labels.insert(spec.label()).second) fail_file(file, "method '{}' appears twice (give it a variant)", spec.label());
     spec.preset = get<std::string>(m, "preset", "", file, where);
-    if (!spec.preset.empty() && spec.preset != "paper" && spec.preset != "release" && spec.preset != "plus")
-      fail_file(file, "{}: preset must be 'paper', 'release' or 'plus' (got '{}')", where, spec.preset);
+    if (!spec.preset.empty()) {
+      const auto& presets = d2gs_preset_names();
+      if (std::find(presets.begin(), presets.end(), spec.preset) == presets.end())
+        fail_file(file, "{}: preset must be one of {} (got '{}')", where, fmt::join(presets, ", "), spec.preset);
+      if (spec.method != "d2gs")
+        fail_file(file, "{}: preset '{}' is a D2GS preset, but the method is {}", where, spec.preset, spec.method);
+    }
     if (m.contains("scene_preset")) {
       if (m["scene_preset"].is_boolean()) spec.use_scene_preset = m["scene_preset"].get<bool>();
       else if (m["scene_preset"].is_string()) spec.scene_preset = m["scene_preset"].get<std::string>();

@@ -13,6 +13,7 @@
 #include "d2gs/core/json_value.hpp"
 #include "d2gs/train/config.hpp"
 #include "d2gs/train/methods/registry.hpp"
+#include "d2gs/train/presets.hpp"
 
 namespace d2gs {
 namespace {
@@ -195,6 +196,13 @@ TrainOption text(const Spec& s, Field field, OptionKind kind = OptionKind::Text,
     return v.empty() ? std::string("none") : v;
   };
   return o;
+}
+
+// --preset's words: none (the defaults) or one of presets.hpp's names.
+std::vector<std::pair<std::string, std::string>> preset_choices() {
+  std::vector<std::pair<std::string, std::string>> names = {{"", ""}};
+  for (const std::string& n : d2gs_preset_names()) names.emplace_back(n, n);
+  return names;
 }
 
 // One of a few names, each standing for a value of the field (an enum, a bool or a string).
@@ -422,12 +430,12 @@ std::vector<TrainOption> declare() {
                      [](auto& c) -> auto& { return c.dropgaussian_max_rate; }, half_open(0, 1)));
   // ---- D²GS ----
   t.push_back(choice({"preset", dd_drop,
-                      "D²GS preset: 'paper' (the paper's formulas and constants) or 'release' (the authors' code, "
+                      "D²GS preset, with --method d2gs only: 'paper' (the paper's formulas and constants) or 'release' (the authors' code, "
                       "quirks included; its values are the defaults, chosen by measurement: docs/training.md) or 'plus' "
                       "(the release with compensation per Gaussian and opacity decay in place of the opacity reset); "
                       "applied over --config, and flags override it"},
                      [](auto& c) -> auto& { return c.preset; },
-                     {{"", ""}, {"paper", "paper"}, {"release", "release"}, {"plus", "plus"}}));
+                     preset_choices()));
   t.push_back(text({"scene_preset", dd_drop,
                     "D²GS per-scene values of the release, e.g. fern, llff/room, mipnerf360/bicycle (weights, rates, "
                     "far-mask %, DAFE weight); applied after --preset"},

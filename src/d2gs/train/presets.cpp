@@ -2,11 +2,17 @@
 
 #include <algorithm>
 
+#include <fmt/ranges.h>
 #include <nlohmann/json.hpp>
 
 #include "d2gs/core/error.hpp"
 
 namespace d2gs {
+
+const std::vector<std::string>& d2gs_preset_names() {
+  static const std::vector<std::string> names = {"paper", "release", "plus"};
+  return names;
+}
 
 const std::vector<D2gsScenePreset>& d2gs_scene_presets() {
   // (w_d, w_ρ, r_min, r_max, mask %, λ_DAFE) per scene, method.md §4.
@@ -55,7 +61,7 @@ void apply_d2gs_preset(TrainConfig& c, const std::string& preset) {
       c.regularisers.push_back("opacity-decay");
     c.opacity_reset_at.clear();
   } else {
-    fail("unknown D2GS preset '{}' (expected paper, release or plus)", preset);
+    fail("unknown D2GS preset '{}' (expected one of: {})", preset, fmt::join(d2gs_preset_names(), ", "));
   }
 }
 
@@ -92,6 +98,9 @@ void apply_given_options(TrainConfig& c, const nlohmann::json& given) {
   if (const std::string preset = named("preset"); !preset.empty()) apply_d2gs_preset(out, preset);
   if (const std::string scene = named("scene_preset"); !scene.empty()) apply_scene_preset(out, scene);
   update_from_json(out, given);
+  if (const std::string preset = named("preset"); !preset.empty() && out.method != "d2gs")
+    fail("--preset {} is a D2GS preset, but the method is {} (give that method's options by name instead)", preset,
+         out.method);
   c = std::move(out);
 }
 

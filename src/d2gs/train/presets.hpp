@@ -16,6 +16,9 @@ struct D2gsScenePreset {
   double weight_depth, weight_density, rate_min, rate_max, mask_percent, dafe_lambda;
 };
 
+// The names --preset accepts, in --help's order: paper, release, plus.
+const std::vector<std::string>& d2gs_preset_names();
+
 // Every per-scene configuration of the release, in method.md's order.
 const std::vector<D2gsScenePreset>& d2gs_scene_presets();
 
@@ -25,7 +28,7 @@ const std::vector<D2gsScenePreset>& d2gs_scene_presets();
 //   DAFE loss averaged over all C·H·W values.
 // "plus": the release, plus DropGaussian's compensation per Gaussian (kept opacity ÷ (1 − p_i)) and
 //   opacity decay (regulariser "opacity-decay") without the opacity reset; issue 25, docs/training.md.
-// Throws d2gs::Error for another name.
+// Throws d2gs::Error for another name, listing d2gs_preset_names().
 void apply_d2gs_preset(TrainConfig& config, const std::string& preset);
 
 // Sets w_d, w_ρ, r_min, r_max, the far-mask percentage and λ_DAFE of a scene: "fern", "llff/fern",
@@ -35,7 +38,9 @@ void apply_scene_preset(TrainConfig& config, const std::string& name);
 
 // The command line's options (config.json keys) over `config`, which holds the defaults and any
 // --config file: first the presets they name (`preset`, then `scene_preset`), then every option given,
-// so that an explicit flag wins over a preset, and the names of the presets are recorded.
+// so that an explicit flag wins over a preset, and the names of the presets are recorded. A `preset`
+// with a method other than d2gs throws: "plus" would change that method's training (opacity decay,
+// no reset) and the others set options it never reads.
 void apply_given_options(TrainConfig& config, const nlohmann::json& given);
 
 }  // namespace d2gs
