@@ -32,6 +32,20 @@ TEST(Presets, PaperAndRelease) {
   EXPECT_DOUBLE_EQ(c.dafe.tau, 5.0);
   EXPECT_EQ(c.dafe.loss_form, DafeLossForm::Paper);
   EXPECT_THROW(apply_d2gs_preset(c, "best"), Error);
+  // release undoes everything paper sets, the far mask's τ and λ_DAFE included: the two
+  // presets leave the same config whatever came before.
+  TrainConfig changed;
+  changed.dafe.tau = 12.0;
+  changed.dafe.lambda = 0.25f;
+  changed.dafe.mask_rule = DafeMaskRule::Threshold;
+  apply_d2gs_preset(changed, "paper");
+  apply_d2gs_preset(changed, "release");
+  TrainConfig released;
+  apply_d2gs_preset(released, "release");
+  nlohmann::json a, b;
+  to_json(a, changed);
+  to_json(b, released);
+  EXPECT_EQ(a, b) << a.dump(1) << "\n" << b.dump(1);
 }
 
 // "plus" is the release with exactly three things changed: compensation per Gaussian, opacity decay

@@ -51,7 +51,9 @@ void apply_d2gs_preset(TrainConfig& c, const std::string& preset) {
     c.dd_drop.rate_min = d.dd_drop.rate_min;
     c.dd_drop.rate_max = d.dd_drop.rate_max;
     c.dafe.mask_rule = d.dafe.mask_rule;
+    c.dafe.tau = d.dafe.tau;
     c.dafe.loss_form = d.dafe.loss_form;
+    c.dafe.lambda = d.dafe.lambda;
   } else if (preset == "plus") {
     // The release, with the two weight-free levers that won issue 25's screen together: each kept
     // Gaussian's opacity divided by (1 − p_i), and opacity decay in place of the opacity reset.
