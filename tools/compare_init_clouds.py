@@ -15,33 +15,13 @@ import sys
 import numpy as np
 from scipy.spatial import cKDTree
 
+from plyio import read_xyz
+
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 FERN = ROOT.parent / "shared" / "data" / "nerf_llff_data" / "fern"
 PUBLISHED = ROOT.parent / "shared" / "data" / "published_init" / "fern" / "3_views_fused.ply"
 TRAIN_VIEWS = [1, 10, 19]
 FAR_DEPTH = 40.0  # view 10's depth beyond which fern's scene is the hall behind the plant
-
-
-def read_ply_xyz(path):
-    with open(path, "rb") as f:
-        header = []
-        while True:
-            line = f.readline()
-            if not line:
-                sys.exit(f"{path}: no end_header")
-            line = line.decode("ascii", "replace").strip()
-            header.append(line)
-            if line == "end_header":
-                break
-        count = int(next(h for h in header if h.startswith("element vertex")).split()[2])
-        props = [h.split() for h in header if h.startswith("property")]
-        types = {"float": "<f4", "float32": "<f4", "double": "<f8", "uchar": "u1", "uint8": "u1"}
-        if any("ascii" in h for h in header if h.startswith("format")):
-            data = np.loadtxt(f, max_rows=count)
-            return data[:, [p[2] for p in props].index("x"):][:, :3].astype(np.float64)
-        dtype = np.dtype([(p[2], types[p[1]]) for p in props])
-        a = np.frombuffer(f.read(count * dtype.itemsize), dtype=dtype, count=count)
-        return np.stack([a["x"], a["y"], a["z"]], 1).astype(np.float64)
 
 
 def camera(poses, k):
@@ -76,8 +56,8 @@ def describe(name, points, poses):
 def main():
     if len(sys.argv) not in (2, 3):
         sys.exit(__doc__)
-    ours = read_ply_xyz(sys.argv[1])
-    theirs = read_ply_xyz(sys.argv[2] if len(sys.argv) == 3 else PUBLISHED)
+    ours = read_xyz(sys.argv[1])
+    theirs = read_xyz(sys.argv[2] if len(sys.argv) == 3 else PUBLISHED)
     poses = np.load(FERN / "poses_bounds.npy")
     describe("ours", ours, poses)
     describe("published", theirs, poses)

@@ -19,36 +19,7 @@ import sys
 
 import numpy as np
 
-TYPES = {"float": "<f4", "float32": "<f4", "double": "<f8", "uchar": "u1", "uint8": "u1", "int": "<i4"}
-
-
-def read_ply(path):
-    with open(path, "rb") as f:
-        header = []
-        while True:
-            line = f.readline()
-            if not line:
-                sys.exit(f"{path}: no end_header")
-            line = line.decode("ascii", "replace").strip()
-            header.append(line)
-            if line == "end_header":
-                break
-        if "format binary_little_endian 1.0" not in header:
-            sys.exit(f"{path}: not a binary little-endian PLY")
-        count = None
-        fields = []
-        for line in header:
-            words = line.split()
-            if words[:2] == ["element", "vertex"]:
-                count = int(words[2])
-            elif words[0] == "element" and count is not None:
-                break
-            elif words[0] == "property" and count is not None:
-                if words[1] == "list" or words[1] not in TYPES:
-                    sys.exit(f"{path}: unsupported property '{line}'")
-                fields.append((words[2], TYPES[words[1]]))
-        data = np.frombuffer(f.read(), dtype=np.dtype(fields), count=count)
-    return data
+from plyio import read_ply
 
 
 def moments(path):
