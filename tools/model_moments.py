@@ -12,9 +12,15 @@ the squared distance of the means plus a covariance term. This prints, per model
   smax         alpha-weighted mean of each Gaussian's largest axis (exp of its largest log scale)
   max_r        largest distance from the centroid
 
-Usage: tools/model_moments.py RUN/point_cloud/iteration_10000/point_cloud.ply ...
+Usage: tools/model_moments.py [--depth-from CAMERAS.json IMAGE_NAME] RUN/point_cloud/iteration_10000/point_cloud.ply ...
+
+With --depth-from, each model also gets alpha-weighted quantiles of its Gaussians' depth along that camera's
+viewing axis (a camera of a run's cameras.json, named by its img_name, e.g. image010): where the model's
+opacity sits, near to far (d10 .. d99), and the alpha-weight beyond depth FAR (default 40: fern's far wall
+lies at 75-80 from its middle training view; set with --far).
 These are descriptions of the models, not the IMR itself (`d2gs imr` computes that).
 """
+import json
 import sys
 
 import numpy as np
@@ -41,15 +47,60 @@ def moments(path):
     }
 
 
+QUANTILES = (0.1, 0.5, 0.9, 0.95, 0.99)
+
+
+def camera_axis(cameras_path, image_name):
+    """Centre and viewing axis (third column of the camera-to-world rotation) of one camera of a cameras.json."""
+    with open(cameras_path) as f:
+        cameras = json.load(f)
+    found = [c for c in cameras if c.get("img_name") == image_name]
+    if len(found) != 1:
+        names = ", ".join(c.get("img_name", "?") for c in cameras)
+        sys.exit(f"{cameras_path}: no camera named '{image_name}' (cameras: {names})")
+    return np.array(found[0]["position"], dtype=np.float64), np.array(found[0]["rotation"], dtype=np.float64)[:, 2]
+
+
+def depth_profile(path, centre, axis, far):
+    g = read_ply(path)
+    x = np.stack([g["x"], g["y"], g["z"]], 1).astype(np.float64)
+    alpha = 1.0 / (1.0 + np.exp(-g["opacity"].astype(np.float64)))
+    w = alpha / alpha.sum()
+    depth = (x - centre) @ axis
+    order = np.argsort(depth)
+    cumulative = np.cumsum(w[order])
+    q = [depth[order][min(np.searchsorted(cumulative, f), len(order) - 1)] for f in QUANTILES]
+    return q, w[depth > far].sum()
+
+
 def main():
-    if len(sys.argv) < 2:
+    args = sys.argv[1:]
+    depth_from = None
+    far = 40.0
+    while args and args[0].startswith("--"):
+        if args[0] == "--depth-from" and len(args) >= 3:
+            depth_from = camera_axis(args[1], args[2])
+            args = args[3:]
+        elif args[0] == "--far" and len(args) >= 2:
+            far = float(args[1])
+            args = args[2:]
+        else:
+            sys.exit(__doc__)
+    if not args:
         sys.exit(__doc__)
-    print(f"{'model':60s} {'N':>7s} {'mean_alpha':>10s} {'frac<0.05':>9s} {'r2':>8s} {'far_w':>6s} {'smax':>6s} {'max_r':>7s}")
-    for path in sys.argv[1:]:
+    header = f"{'model':60s} {'N':>7s} {'mean_alpha':>10s} {'frac<0.05':>9s} {'r2':>8s} {'far_w':>6s} {'smax':>6s} {'max_r':>7s}"
+    if depth_from is not None:
+        header += "".join(f" {'d' + str(round(100 * f)):>6s}" for f in QUANTILES) + f" {'w(d>' + f'{far:g}' + ')':>9s}"
+    print(header)
+    for path in args:
         m = moments(path)
         name = path.split("/point_cloud/")[0][-60:]
-        print(f"{name:60s} {m['N']:7d} {m['mean_alpha']:10.3f} {m['frac<0.05']:9.2f} {m['r2']:8.1f} "
-              f"{m['far_w']:6.3f} {m['smax']:6.3f} {m['max_r']:7.1f}")
+        row = (f"{name:60s} {m['N']:7d} {m['mean_alpha']:10.3f} {m['frac<0.05']:9.2f} {m['r2']:8.1f} "
+               f"{m['far_w']:6.3f} {m['smax']:6.3f} {m['max_r']:7.1f}")
+        if depth_from is not None:
+            q, w_far = depth_profile(path, *depth_from, far)
+            row += "".join(f" {v:6.1f}" for v in q) + f" {w_far:9.3f}"
+        print(row)
 
 
 if __name__ == "__main__":
