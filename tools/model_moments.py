@@ -28,11 +28,15 @@ import numpy as np
 from plyio import read_ply
 
 
-def moments(path):
+def load(path):
+    """A model's PLY with its positions (N×3), opacities and IMR weights alpha / sum(alpha)."""
     g = read_ply(path)
     x = np.stack([g["x"], g["y"], g["z"]], 1).astype(np.float64)
     alpha = 1.0 / (1.0 + np.exp(-g["opacity"].astype(np.float64)))
-    w = alpha / alpha.sum()
+    return g, x, alpha, alpha / alpha.sum()
+
+
+def moments(g, x, alpha, w):
     scale = np.exp(np.stack([g["scale_0"], g["scale_1"], g["scale_2"]], 1).astype(np.float64)).max(1)
     centre = (w[:, None] * x).sum(0)
     r = np.sqrt(((x - centre) ** 2).sum(1))
@@ -61,11 +65,7 @@ def camera_axis(cameras_path, image_name):
     return np.array(found[0]["position"], dtype=np.float64), np.array(found[0]["rotation"], dtype=np.float64)[:, 2]
 
 
-def depth_profile(path, centre, axis, far):
-    g = read_ply(path)
-    x = np.stack([g["x"], g["y"], g["z"]], 1).astype(np.float64)
-    alpha = 1.0 / (1.0 + np.exp(-g["opacity"].astype(np.float64)))
-    w = alpha / alpha.sum()
+def depth_profile(x, w, centre, axis, far):
     depth = (x - centre) @ axis
     order = np.argsort(depth)
     cumulative = np.cumsum(w[order])
@@ -93,12 +93,13 @@ def main():
         header += "".join(f" {'d' + str(round(100 * f)):>6s}" for f in QUANTILES) + f" {'w(d>' + f'{far:g}' + ')':>9s}"
     print(header)
     for path in args:
-        m = moments(path)
+        g, x, alpha, w = load(path)
+        m = moments(g, x, alpha, w)
         name = path.split("/point_cloud/")[0][-60:]
         row = (f"{name:60s} {m['N']:7d} {m['mean_alpha']:10.3f} {m['frac<0.05']:9.2f} {m['r2']:8.1f} "
                f"{m['far_w']:6.3f} {m['smax']:6.3f} {m['max_r']:7.1f}")
         if depth_from is not None:
-            q, w_far = depth_profile(path, *depth_from, far)
+            q, w_far = depth_profile(x, w, *depth_from, far)
             row += "".join(f" {v:6.1f}" for v in q) + f" {w_far:9.3f}"
         print(row)
 
