@@ -3,6 +3,7 @@
 // densification, and the checks of a checkpoint's method state.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <functional>
@@ -224,10 +225,11 @@ TEST(Methods, ViewMapsAreReadAtTheViewsSizeAndErrorsNameTheFile) {
 }
 
 TEST(Regularisers, RegistryAndNames) {
-  ASSERT_EQ(training_regularisers().size(), 3u);
+  ASSERT_EQ(training_regularisers().size(), 4u);
   EXPECT_STREQ(training_regularisers()[0].name, "opacity-noise");
   EXPECT_STREQ(training_regularisers()[1].name, "opacity-decay");
   EXPECT_STREQ(training_regularisers()[2].name, "stereo-depth");
+  EXPECT_STREQ(training_regularisers()[3].name, "anisotropy");
   TrainConfig c;
   c.method = "dropgaussian";
   c.regularisers = {"opacity-decay", "opacity-noise"};
@@ -303,6 +305,76 @@ TEST(Regularisers, OpacityDecayScalesTheOpacityAfterDensifyFrom) {
   EXPECT_NEAR(f.model.opacity_logits[0], -200.0f + std::log(0.9f), 1e-4);  // underflowing opacity: l + log f
   // Nothing else of the model changes, and the decay keeps no state.
   EXPECT_TRUE(m->state().floats.empty() && m->state().bytes.empty());
+}
+
+// The anisotropy term against its formula, computed independently in double, and its gradient against central
+// differences of that formula; it adds to the gradient it is given and leaves every other parameter alone.
+TEST(Regularisers, AnisotropyHingeOnTheLogAxisRatioAndItsGradient) {
+  TrainConfig c;
+  c.regularisers = {"anisotropy"};
+  c.anisotropy_ratio = 10.0;
+  c.anisotropy_lambda = 0.7;
+  auto m = make_training_method(c);
+  Gaussians model = random_model(6);
+  model.log_scales = {0.0f,  0.5f,  -1.0f,   // ratio e^1.5 = 4.5: inside, no term
+                      -3.0f, 0.2f,  -0.4f,   // ratio e^3.2 = 24.5: beyond
+                      1.0f,  -6.0f, 0.5f,    // ratio e^7: beyond, the smallest axis in the middle
+                      -2.0f, -2.0f, -2.0f,   // isotropic
+                      4.0f,  -9.0f, -9.0f,   // a needle: two equal small axes (the first is taken)
+                      0.5f,  0.5f,  -2.0f};  // a disc: two equal large axes (the first is taken)
+  const auto formula = [&](const std::vector<float>& s) {
+    double sum = 0.0;
+    for (std::size_t i = 0; i < s.size() / 3; ++i) {
+      const double hi = std::max({s[3 * i], s[3 * i + 1], s[3 * i + 2]});
+      const double lo = std::min({s[3 * i], s[3 * i + 1], s[3 * i + 2]});
+      sum += std::max(0.0, hi - lo - std::log(10.0));
+    }
+    return sum / static_cast<double>(s.size() / 3);
+  };
+  Gaussians grad = model;
+  for (auto* a : {&grad.means, &grad.log_scales, &grad.quats, &grad.opacity_logits, &grad.sh_dc, &grad.sh_rest})
+    std::fill(a->begin(), a->end(), 0.25f);  // the render's gradient, which the term adds to
+  const Gaussians before = grad;
+  const std::vector<LossTerm> terms = m->parameter_terms(12, model, grad);
+  ASSERT_EQ(terms.size(), 1u);
+  EXPECT_EQ(terms[0].name, "anisotropy");
+  EXPECT_EQ(terms[0].weight, 0.7);
+  EXPECT_NEAR(terms[0].value, formula(model.log_scales), 1e-6);
+  EXPECT_NEAR(terms[0].value, (3.2 + 7.0 + 13.0 + 2.5 - 4 * std::log(10.0)) / 6.0, 1e-6);
+  for (std::size_t k = 0; k < 12; ++k) {  // the Gaussians without tied axes (ties: a subgradient, below)
+    std::vector<float> plus = model.log_scales, minus = model.log_scales;
+    const float h = 1e-3f;
+    plus[k] += h;
+    minus[k] -= h;
+    const double numeric = 0.7 * (formula(plus) - formula(minus)) / (2.0 * h);
+    EXPECT_NEAR(grad.log_scales[k] - 0.25f, numeric, 1e-4) << "log-scale " << k;
+  }
+  EXPECT_FLOAT_EQ(grad.log_scales[0] - 0.25f, 0.0f);  // inside the ratio: no gradient at all
+  EXPECT_FLOAT_EQ(grad.log_scales[12] - 0.25f, 0.7f / 6.0f);
+  EXPECT_FLOAT_EQ(grad.log_scales[13] - 0.25f, -0.7f / 6.0f);
+  EXPECT_FLOAT_EQ(grad.log_scales[14] - 0.25f, 0.0f);
+  EXPECT_FLOAT_EQ(grad.log_scales[15] - 0.25f, 0.7f / 6.0f);
+  EXPECT_FLOAT_EQ(grad.log_scales[16] - 0.25f, 0.0f);
+  EXPECT_FLOAT_EQ(grad.log_scales[17] - 0.25f, -0.7f / 6.0f);
+  EXPECT_EQ(grad.means, before.means);
+  EXPECT_EQ(grad.quats, before.quats);
+  EXPECT_EQ(grad.opacity_logits, before.opacity_logits);
+  EXPECT_EQ(grad.sh_dc, before.sh_dc);
+  EXPECT_TRUE(m->state().floats.empty() && m->state().bytes.empty());
+
+  // Stacked on a method, the term comes after the method's (none for DropGaussian) and adds the same gradient.
+  TrainConfig stacked = c;
+  stacked.method = "dropgaussian";
+  Gaussians grad2 = before;
+  const std::vector<LossTerm> again = make_training_method(stacked)->parameter_terms(12, model, grad2);
+  ASSERT_EQ(again.size(), 1u);
+  EXPECT_EQ(again[0].value, terms[0].value);
+  EXPECT_EQ(grad2.log_scales, grad.log_scales);
+  // Without the regulariser no method has parameter terms.
+  stacked.regularisers = {};
+  Gaussians grad3 = before;
+  EXPECT_TRUE(make_training_method(stacked)->parameter_terms(12, model, grad3).empty());
+  EXPECT_EQ(grad3.log_scales, before.log_scales);
 }
 
 TEST(Regularisers, StackMultipliesMultipliersAndNamespacesState) {

@@ -3,7 +3,7 @@
 //
 //   auto rasterizer = d2gs::render::make_cpu_rasterizer();
 //   const RenderOutputs& out = rasterizer->forward(model, dropout_mask_or_null, camera, options);
-//   const RenderGradients& g = rasterizer->backward(dL_drgb, dL_dalpha, dL_ddepth);
+//   RenderGradients& g = rasterizer->backward(dL_drgb, dL_dalpha, dL_ddepth);
 //
 // A rasterizer object owns all of its workspace and reuses it from one call to the next, so a training
 // loop allocates nothing after the first iterations. forward() results stay valid until the next
@@ -81,8 +81,8 @@ public:
   virtual const RenderOutputs& forward(const Gaussians& model, const float* opacity_multiplier,
                                        const RenderCamera& camera, const RenderOptions& options) = 0;
   // Gradients of the loss w.r.t. the outputs of the last forward(): H x W x 3, H x W, H x W; any may be
-  // null (= zero).
-  virtual const RenderGradients& backward(const float* d_rgb, const float* d_alpha, const float* d_depth) = 0;
+  // null (= zero). The caller may add to them (a loss term on the parameters themselves) until the next call.
+  virtual RenderGradients& backward(const float* d_rgb, const float* d_alpha, const float* d_depth) = 0;
 };
 
 // The CPU reference backend (OpenMP over tiles; deterministic whatever the thread count).

@@ -93,6 +93,11 @@ struct TrainConfig {
   // 0.05 puts a typical relative disparity error of 0.1–0.3 at a few tenths of the L1 colour loss; chosen
   // a priori, not tuned on a scene.
   double stereo_depth_lambda = 0.05;
+  // anisotropy (PhysGaussian, CVPR 2024): λ · mean max(0, ln(s_max / s_min) − ln r). r = 10 is
+  // PhysGaussian's and TLC-Calib's ratio; λ = 1 gives every Gaussian beyond it a log-scale gradient of ±1/N
+  // (chosen a priori, not tuned on a scene).
+  double anisotropy_ratio = 10.0;
+  double anisotropy_lambda = 1.0;
 
   // outputs
   std::vector<int> save_iterations;        // empty = the last iteration only

@@ -535,6 +535,12 @@ std::vector<TrainOption> declare() {
                       "stereo-depth: weight of the relative disparity L1 between the render and the training views' "
                       "stereo depth"},
                      [](auto& c) -> auto& { return c.stereo_depth_lambda; }, at_least(0)));
+  t.push_back(number({"anisotropy_ratio", regularisers,
+                      "anisotropy: the axis ratio s_max / s_min beyond which a Gaussian is penalised"},
+                     [](auto& c) -> auto& { return c.anisotropy_ratio; }, {.min = 1.0}));
+  t.push_back(number({"anisotropy_lambda", regularisers,
+                      "anisotropy: weight of mean max(0, ln(s_max / s_min) − ln ratio) over the Gaussians"},
+                     [](auto& c) -> auto& { return c.anisotropy_lambda; }, at_least(0)));
   // ---- outputs ----
   t.push_back(integer_list({"save_iterations", outputs, "Iterations whose model is saved (default: the last)", Output},
                            [](auto& c) -> auto& { return c.save_iterations; }, closed(1, 2147483647)));

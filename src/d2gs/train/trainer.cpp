@@ -454,8 +454,15 @@ IterationRecord Trainer::step() {
   }
   if (!std::isfinite(rec.loss)) fail("iteration {}: the loss is not finite ({}); stopping", t, rec.loss);
 
-  const auto& grads = s.rasterizer->backward(s.grad_rgb.data(), depth_terms ? s.grad_alpha.data() : nullptr,
-                                             depth_terms ? s.grad_depth.data() : nullptr);
+  auto& grads = s.rasterizer->backward(s.grad_rgb.data(), depth_terms ? s.grad_alpha.data() : nullptr,
+                                       depth_terms ? s.grad_depth.data() : nullptr);
+  {
+    const profile::Scope p("loss: method's parameter terms");
+    for (LossTerm& term : s.method->parameter_terms(t, s.model, grads.model)) {
+      rec.loss += term.weight * term.value;
+      rec.terms.push_back(std::move(term));
+    }
+  }
   {
     const profile::Scope p("finite checks");
     const auto check = [&](const std::vector<float>& a, const char* name) {

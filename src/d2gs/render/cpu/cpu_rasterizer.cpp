@@ -115,7 +115,7 @@ public:
     return out_;
   }
 
-  const RenderGradients& backward(const float* d_rgb, const float* d_alpha, const float* d_depth) override {
+  RenderGradients& backward(const float* d_rgb, const float* d_alpha, const float* d_depth) override {
     Gaussians& g = grads_.model;
     if (g.size() != n_ || g.sh_degree != degree_) {
       g.sh_degree = degree_;

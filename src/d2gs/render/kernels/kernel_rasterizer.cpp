@@ -45,7 +45,7 @@ public:
     return out_;
   }
 
-  const RenderGradients& backward(const float* d_rgb, const float* d_alpha, const float* d_depth) override {
+  RenderGradients& backward(const float* d_rgb, const float* d_alpha, const float* d_depth) override {
     const CompositeGrads& projected = stages_->composite_backward(d_rgb, d_alpha, d_depth);
     const BackwardStages& b = stages_->backward_from_composite();
     Gaussians& g = grads_.model;

@@ -6,7 +6,8 @@
 //
 // One iteration, as the trainer runs it (docs/training.md):
 //   camera → prepare() → opacity_multiplier() → render → L1 + λ·(1 − SSIM) + loss_terms() on the
-//   clamped image (and the depth and alpha, for a method that uses_depth()) → backward → before_update() → densification, then after_densify() → Adam step.
+//   clamped image (and the depth and alpha, for a method that uses_depth()) → backward → parameter_terms()
+//   → before_update() → densification, then after_densify() → Adam step.
 //
 // A new method or regulariser is one file here (a TrainingMethod and its make_ function) and its entry
 // in registry.cpp (docs/training.md, "Adding a method"); options of its own go into TrainConfig.
@@ -141,6 +142,12 @@ public:
   // Whether loss_terms() needs the render's depth and alpha and their gradients. Without it the backward
   // gets no depth or alpha gradient at all, exactly as before the hook existed.
   virtual bool uses_depth() const { return false; }
+  // Loss terms on the parameters themselves (a regulariser of the Gaussians' shapes), after the backward on
+  // every iteration: each adds weight · its gradient w.r.t. the parameters to `grad` (the render's
+  // gradients, the model's shape) and is returned, as loss_terms() does for the image.
+  virtual std::vector<LossTerm> parameter_terms(int /*iteration*/, const Gaussians& /*model*/, Gaussians& /*grad*/) {
+    return {};
+  }
   // After the backward, before densification and the Adam step, on every iteration but the last (whose
   // model is the one saved): edits of the parameters themselves (opacity decay). The Adam moments stay.
   virtual void before_update(int /*iteration*/, Gaussians& /*model*/) {}

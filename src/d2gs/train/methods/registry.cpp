@@ -17,6 +17,7 @@ std::unique_ptr<TrainingMethod> make_d2gs(const TrainConfig& config);
 std::unique_ptr<TrainingMethod> make_opacity_noise(const TrainConfig& config);
 std::unique_ptr<TrainingMethod> make_opacity_decay(const TrainConfig& config);
 std::unique_ptr<TrainingMethod> make_stereo_depth(const TrainConfig& config);
+std::unique_ptr<TrainingMethod> make_anisotropy(const TrainConfig& config);
 std::unique_ptr<TrainingMethod> stack_methods(std::unique_ptr<TrainingMethod> method,
                                               std::vector<std::pair<std::string, std::unique_ptr<TrainingMethod>>> parts);
 
@@ -38,6 +39,9 @@ const std::vector<MethodInfo>& training_regularisers() {
       {"stereo-depth", "the render's disparity pulled towards the training views' multi-view stereo depth, weighted by "
                        "--stereo-depth-lambda",
        &make_stereo_depth},
+      {"anisotropy", "a hinge on each Gaussian's log axis ratio beyond --anisotropy-ratio, weighted by --anisotropy-lambda "
+                     "(PhysGaussian)",
+       &make_anisotropy},
   };
   return regularisers;
 }

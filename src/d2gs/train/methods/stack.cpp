@@ -75,6 +75,13 @@ public:
     return terms;
   }
 
+  std::vector<LossTerm> parameter_terms(int iteration, const Gaussians& model, Gaussians& grad) override {
+    std::vector<LossTerm> terms = method_->parameter_terms(iteration, model, grad);
+    for (auto& [n, p] : parts_)
+      for (LossTerm& t : p->parameter_terms(iteration, model, grad)) terms.push_back(std::move(t));
+    return terms;
+  }
+
   bool uses_depth() const override {
     if (method_->uses_depth()) return true;
     for (const auto& p : parts_)
