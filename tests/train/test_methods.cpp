@@ -225,11 +225,12 @@ TEST(Methods, ViewMapsAreReadAtTheViewsSizeAndErrorsNameTheFile) {
 }
 
 TEST(Regularisers, RegistryAndNames) {
-  ASSERT_EQ(training_regularisers().size(), 4u);
+  ASSERT_EQ(training_regularisers().size(), 5u);
   EXPECT_STREQ(training_regularisers()[0].name, "opacity-noise");
   EXPECT_STREQ(training_regularisers()[1].name, "opacity-decay");
   EXPECT_STREQ(training_regularisers()[2].name, "stereo-depth");
   EXPECT_STREQ(training_regularisers()[3].name, "anisotropy");
+  EXPECT_STREQ(training_regularisers()[4].name, "scale-l1");
   TrainConfig c;
   c.method = "dropgaussian";
   c.regularisers = {"opacity-decay", "opacity-noise"};
@@ -375,6 +376,57 @@ TEST(Regularisers, AnisotropyHingeOnTheLogAxisRatioAndItsGradient) {
   Gaussians grad3 = before;
   EXPECT_TRUE(make_training_method(stacked)->parameter_terms(12, model, grad3).empty());
   EXPECT_EQ(grad3.log_scales, before.log_scales);
+}
+
+// The scale-l1 term against its formula, λ · mean over the N×3 entries of exp(s), computed independently in
+// double, and its gradient on the log-scales against central differences; nothing else is touched.
+TEST(Regularisers, ScaleL1IsTheMeanScaleAndItsGradient) {
+  TrainConfig c;
+  c.regularisers = {"scale-l1"};
+  c.scale_l1_lambda = 0.3;
+  auto m = make_training_method(c);
+  Gaussians model = random_model(5);
+  model.log_scales[4] = 3.0f;    // a large axis: e³ ≈ 20, its gradient 20 times an axis of size 1
+  model.log_scales[9] = -12.0f;  // a tiny one: almost no gradient
+  const auto formula = [](const std::vector<float>& s) {
+    double sum = 0.0;
+    for (float v : s) sum += std::exp(static_cast<double>(v));
+    return sum / static_cast<double>(s.size());
+  };
+  Gaussians grad = model;
+  for (auto* a : {&grad.means, &grad.log_scales, &grad.quats, &grad.opacity_logits, &grad.sh_dc, &grad.sh_rest})
+    std::fill(a->begin(), a->end(), -0.5f);
+  const Gaussians before = grad;
+  const std::vector<LossTerm> terms = m->parameter_terms(3, model, grad);
+  ASSERT_EQ(terms.size(), 1u);
+  EXPECT_EQ(terms[0].name, "scale_l1");
+  EXPECT_EQ(terms[0].weight, 0.3);
+  EXPECT_NEAR(terms[0].value, formula(model.log_scales), 1e-6 * terms[0].value);
+  for (std::size_t k = 0; k < model.log_scales.size(); ++k) {
+    std::vector<double> plus(model.log_scales.begin(), model.log_scales.end()), minus = plus;
+    const double h = 1e-4;
+    plus[k] += h;
+    minus[k] -= h;
+    const auto mean_exp = [](const std::vector<double>& s) {
+      double sum = 0.0;
+      for (double v : s) sum += std::exp(v);
+      return sum / static_cast<double>(s.size());
+    };
+    const double numeric = 0.3 * (mean_exp(plus) - mean_exp(minus)) / (2.0 * h);
+    EXPECT_NEAR(grad.log_scales[k] + 0.5f, numeric, 1e-5 + 1e-5 * std::abs(numeric)) << "log-scale " << k;
+  }
+  EXPECT_NEAR(grad.log_scales[4] + 0.5f, 0.3 * std::exp(3.0) / 15.0, 1e-5);
+  EXPECT_EQ(grad.means, before.means);
+  EXPECT_EQ(grad.quats, before.quats);
+  EXPECT_EQ(grad.opacity_logits, before.opacity_logits);
+  EXPECT_EQ(grad.sh_dc, before.sh_dc);
+  EXPECT_EQ(grad.sh_rest, before.sh_rest);
+  EXPECT_TRUE(m->state().floats.empty() && m->state().bytes.empty());
+  // λ = 0: the term is logged but adds nothing.
+  c.scale_l1_lambda = 0.0;
+  Gaussians grad0 = before;
+  (void)make_training_method(c)->parameter_terms(3, model, grad0);
+  EXPECT_EQ(grad0.log_scales, before.log_scales);
 }
 
 TEST(Regularisers, StackMultipliesMultipliersAndNamespacesState) {

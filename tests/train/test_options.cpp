@@ -137,7 +137,7 @@ TEST(TrainOptions, RegularisersAreAListOfNames) {
   EXPECT_EQ(test::error_of([&] { update_from_json(c, nlohmann::json{{"regularisers", "opacity-noise"}}); }),
             "key 'regularisers' has the wrong type (expected list of names, got string)");
   EXPECT_EQ(test::error_of([&] { update_from_json(c, nlohmann::json{{"regularisers", {"noise"}}}); }),
-            "key 'regularisers': 'noise' is not one of opacity-noise, opacity-decay, stereo-depth, anisotropy");
+            "key 'regularisers': 'noise' is not one of opacity-noise, opacity-decay, stereo-depth, anisotropy, scale-l1");
 }
 
 // `d2gs train --help`: every option once, with its range and its default.

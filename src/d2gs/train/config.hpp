@@ -98,6 +98,9 @@ struct TrainConfig {
   // (chosen a priori, not tuned on a scene).
   double anisotropy_ratio = 10.0;
   double anisotropy_lambda = 1.0;
+  // scale-l1 (3DGS-MCMC, NeurIPS 2024): λ · mean of the N×3 activated scales; λ = 0.01 is 3DGS-MCMC's default
+  // (its scenes are in COLMAP units, like ours; not tuned on a scene).
+  double scale_l1_lambda = 0.01;
 
   // outputs
   std::vector<int> save_iterations;        // empty = the last iteration only

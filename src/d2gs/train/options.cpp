@@ -541,6 +541,9 @@ std::vector<TrainOption> declare() {
   t.push_back(number({"anisotropy_lambda", regularisers,
                       "anisotropy: weight of mean max(0, ln(s_max / s_min) − ln ratio) over the Gaussians"},
                      [](auto& c) -> auto& { return c.anisotropy_lambda; }, at_least(0)));
+  t.push_back(number({"scale_l1_lambda", regularisers,
+                      "scale-l1: weight of the mean of the Gaussians' scales (all three axes)"},
+                     [](auto& c) -> auto& { return c.scale_l1_lambda; }, at_least(0)));
   // ---- outputs ----
   t.push_back(integer_list({"save_iterations", outputs, "Iterations whose model is saved (default: the last)", Output},
                            [](auto& c) -> auto& { return c.save_iterations; }, closed(1, 2147483647)));

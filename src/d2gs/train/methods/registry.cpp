@@ -18,6 +18,7 @@ std::unique_ptr<TrainingMethod> make_opacity_noise(const TrainConfig& config);
 std::unique_ptr<TrainingMethod> make_opacity_decay(const TrainConfig& config);
 std::unique_ptr<TrainingMethod> make_stereo_depth(const TrainConfig& config);
 std::unique_ptr<TrainingMethod> make_anisotropy(const TrainConfig& config);
+std::unique_ptr<TrainingMethod> make_scale_l1(const TrainConfig& config);
 std::unique_ptr<TrainingMethod> stack_methods(std::unique_ptr<TrainingMethod> method,
                                               std::vector<std::pair<std::string, std::unique_ptr<TrainingMethod>>> parts);
 
@@ -42,6 +43,8 @@ const std::vector<MethodInfo>& training_regularisers() {
       {"anisotropy", "a hinge on each Gaussian's log axis ratio beyond --anisotropy-ratio, weighted by --anisotropy-lambda "
                      "(PhysGaussian)",
        &make_anisotropy},
+      {"scale-l1", "an L1 pull on the Gaussians' scales, mean over the N×3 scales weighted by --scale-l1-lambda (3DGS-MCMC)",
+       &make_scale_l1},
   };
   return regularisers;
 }
