@@ -85,6 +85,15 @@ RegularisedAndPlain train_resume_and_train_plain(TrainConfig cfg, const fs::path
   return runs;
 }
 
+// The last line of a train_log.jsonl that reports an iteration ("" when there is none).
+std::string last_iteration_line(const fs::path& log_file) {
+  std::ifstream log(log_file);
+  std::string line, last;
+  while (std::getline(log, line))
+    if (nlohmann::json::parse(line).contains("iteration")) last = line;
+  return last;
+}
+
 TEST(Trainer, TestPsnrRisesWellAboveTheInitialRender) {
   const auto dir = test::scratch_dir();
   auto cfg = fern_config(dir / "run", "3dgs", 300);
@@ -239,10 +248,7 @@ TEST(Trainer, AnisotropyKeepsAxisRatiosDownAndResumesBitIdentically) {
   const double regularised = mean_log_ratio(runs.regularised->model()), plain = mean_log_ratio(runs.plain->model());
   EXPECT_GT(plain, 0.02);  // the photometric gradients alone make the Gaussians anisotropic
   EXPECT_LT(regularised, 0.5 * plain);
-  std::ifstream log(dir / "a/train_log.jsonl");
-  std::string line, last;
-  while (std::getline(log, line))
-    if (nlohmann::json::parse(line).contains("iteration")) last = line;
+  const std::string last = last_iteration_line(dir / "a/train_log.jsonl");
   ASSERT_FALSE(last.empty());
   EXPECT_TRUE(nlohmann::json::parse(last).contains("anisotropy")) << last;
 }
@@ -263,10 +269,7 @@ TEST(Trainer, ScaleL1ShrinksTheGaussiansAndResumesBitIdentically) {
   // Adam moves each log-scale by at most about the scale learning rate (0.005) per step: 20 steps pull the
   // regularised run's down by up to 0.1 where the photometric gradient does not hold them.
   EXPECT_LT(mean_log_scale(runs.regularised->model()), mean_log_scale(runs.plain->model()) - 0.03);
-  std::ifstream log(dir / "a/train_log.jsonl");
-  std::string line, last;
-  while (std::getline(log, line))
-    if (nlohmann::json::parse(line).contains("iteration")) last = line;
+  const std::string last = last_iteration_line(dir / "a/train_log.jsonl");
   ASSERT_FALSE(last.empty());
   EXPECT_TRUE(nlohmann::json::parse(last).contains("scale_l1")) << last;
 }
