@@ -57,8 +57,8 @@ def strata_subsample(x, axis, n):
     count = len(x)
     m = min(n, count)
     b = count // m
-    third = count // 3
-    return np.concatenate([order[:third][:: b + 2], order[third:2 * third][::b], order[2 * third:][:: max(1, b - 2)]])
+    cut1, cut2 = count // 3, 2 * count // 3  # the thirds of d2gs imr and docs/imr.md: [0, N//3), [N//3, 2N//3), [2N//3, N)
+    return np.concatenate([order[:cut1][:: b + 2], order[cut1:cut2][::b], order[cut2:][:: max(1, b - 2)]])
 
 
 def floor_covariances(cov):
