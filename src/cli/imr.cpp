@@ -40,6 +40,7 @@ struct ImrCommandOptions {
   // The library's defaults (ImrOptions), so help text and behaviour cannot drift from them.
   double epsilon = ImrOptions{}.sinkhorn.epsilon;
   std::size_t samples = ImrOptions{}.mixture.samples;
+  std::size_t strata_phase = ImrOptions{}.mixture.phase;
   double tolerance = ImrOptions{}.sinkhorn.tolerance;
   int max_iterations = ImrOptions{}.sinkhorn.max_iterations;
   bool exact_bures = false;
@@ -125,6 +126,7 @@ int run_imr(const ImrCommandOptions& o) {
   if (!o.json.empty()) check_output_file(o.json);
   ImrOptions options;
   options.mixture.samples = o.samples;
+  options.mixture.phase = o.strata_phase;
   options.cost.shape = o.exact_bures ? ShapeCost::ExactBures : ShapeCost::TaylorBures;
   options.cost.clamp_shape = !o.no_clamp;
   options.cost.normalize = !o.no_normalize;
@@ -261,7 +263,8 @@ int run_imr(const ImrCommandOptions& o) {
     nlohmann::json out;
     out["models"] = models;
     out["reference_camera"] = reference_name;
-    out["options"] = {{"epsilon", o.epsilon}, {"samples", o.samples}, {"tolerance", o.tolerance},
+    out["options"] = {{"epsilon", o.epsilon}, {"samples", o.samples}, {"strata_phase", o.strata_phase},
+                      {"tolerance", o.tolerance},
                       {"max_iterations", o.max_iterations}, {"shape_cost", to_string(options.cost.shape)},
                       {"clamp_shape", options.cost.clamp_shape}, {"normalize", options.cost.normalize},
                       {"cost_storage", to_string(options.storage)}, {"epsilon_scaling", o.epsilon_scaling},
@@ -305,6 +308,11 @@ Run add_imr_command(CLI::App& app) {
       ->capture_default_str();
   sub->add_option("--epsilon", o->epsilon, "Entropic regularisation (on the normalised cost)")->capture_default_str();
   sub->add_option("--samples", o->samples, "Depth-strata sample count n (0 = all Gaussians)")
+      ->capture_default_str()
+      ->check(not_negative());
+  sub->add_option("--strata-phase", o->strata_phase,
+                  "Start each depth third's stride k ranks later (k mod its stride; 0 = the release's subsample): "
+                  "IMR of other subsamples, to see how much it depends on the one taken (docs/imr.md)")
       ->capture_default_str()
       ->check(not_negative());
   sub->add_option("--tolerance", o->tolerance, "Stop when the log-potentials change less than this")

@@ -91,6 +91,18 @@ TEST(Mixture, DepthStrataHandComputed) {
   std::iota(many.begin(), many.end(), 0.0);
   EXPECT_EQ(depth_strata_indices(many, 10000).size(), 2000u + 3334u + 10000u);
   EXPECT_TRUE(depth_strata_indices({}, 10).empty());
+  // A phase k starts each third at its first rank + k mod its stride: phase 1 takes near {1}, middle {7, 11},
+  // far {14, 16, 18}; phase 5 the near third's rank 5 and the others' phase 1 again (5 mod 4 = 5 mod 2 = 1);
+  // phase 6: near 6 mod 6 = 0 → {0}, middle 6 + 2 → {8, 12}, far 13 + 0 → {13, 15, 17, 19}.
+  const std::vector<std::vector<std::size_t>> phased = {
+      {1, 7, 11, 14, 16, 18}, {5, 7, 11, 14, 16, 18}, {0, 8, 12, 13, 15, 17, 19}};
+  const std::size_t phases[3] = {1, 5, 6};
+  for (int p = 0; p < 3; ++p) {
+    const auto got = depth_strata_indices(depths, 5, phases[p]);
+    ASSERT_EQ(got.size(), phased[p].size()) << phases[p];
+    for (std::size_t k = 0; k < got.size(); ++k) EXPECT_EQ(got[k], (3 * phased[p][k]) % 20) << phases[p] << " " << k;
+  }
+  EXPECT_EQ(depth_strata_indices(depths, 5, 0), picked);  // phase 0 is the release's
   // Ties keep model order (stable sort).
   EXPECT_EQ(depth_strata_indices(std::vector<double>(4, 1.0), 4), (std::vector<std::size_t>{0, 1, 2, 3}));
 }

@@ -75,6 +75,24 @@ TEST(ImrCli, PlyFilesAndRunFoldersAgreeWithTheLibrary) {
   EXPECT_FALSE(p["options"]["epsilon_scaling"].get<bool>());
   const double scaled_cost = expected.pairs[1].transport.transport_cost;  // pair (a, c)
   EXPECT_NEAR(p["pairs"][0]["transport_cost"].get<double>(), scaled_cost, 1e-4 * scaled_cost);
+
+  // --strata-phase 1: another subsample by the same rule, recorded, and what the library gives for it.
+  const auto phased = test::run_cli("imr '" + (dir / "a.ply").string() + "' '" + (dir / "c.ply").string() + "' -s '" +
+                                    fern.string() + "' -r 8 --samples 300 --strata-phase 1 --json '" +
+                                    (dir / "phase.json").string() + "'");
+  ASSERT_EQ(phased.exit_code, 0) << phased.output;
+  std::ifstream in_phase(dir / "phase.json");
+  const nlohmann::json ph = nlohmann::json::parse(in_phase);
+  EXPECT_EQ(ph["options"]["strata_phase"].get<std::size_t>(), 1u);
+  EXPECT_EQ(j["options"]["strata_phase"].get<std::size_t>(), 0u);
+  ImrOptions o1 = o;
+  o1.debiased = false;
+  o1.mixture.phase = 1;
+  const ImrResult expected1 =
+      compute_imr({mixture_from_model(models[0], cam, o1.mixture), mixture_from_model(models[2], cam, o1.mixture)}, o1);
+  EXPECT_DOUBLE_EQ(ph["imr"].get<double>(), expected1.imr);
+  EXPECT_NE(ph["pairs"][0]["scale"].get<double>(), j["pairs"][1]["scale"].get<double>())
+      << "phase 1 took the release's subsample";
 }
 
 TEST(ImrCli, WarnsWithoutSceneAndRejectsBadInput) {
@@ -120,6 +138,9 @@ TEST(ImrCli, OptionsAreCheckedBeforeTheModelsAreLoaded) {
   const auto samples = test::run_cli("imr " + models + " --samples -1");
   EXPECT_NE(samples.exit_code, 0) << samples.output;
   EXPECT_NE(samples.output.find("--samples"), std::string::npos) << samples.output;
+  const auto phase = test::run_cli("imr " + models + " --strata-phase -1");
+  EXPECT_NE(phase.exit_code, 0) << phase.output;
+  EXPECT_NE(phase.output.find("--strata-phase"), std::string::npos) << phase.output;
   // --json under a file: refused before any work.
   write_gaussians_ply(dir / "real.ply", random_model(50, 1));
   const auto json = test::run_cli("imr '" + (dir / "real.ply").string() + "' '" + (dir / "real.ply").string() +

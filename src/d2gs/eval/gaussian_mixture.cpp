@@ -49,7 +49,8 @@ std::vector<double> imr_depths(const Gaussians& model, const Camera& reference) 
   return depths;
 }
 
-std::vector<std::size_t> depth_strata_indices(const std::vector<double>& depths, std::size_t samples) {
+std::vector<std::size_t> depth_strata_indices(const std::vector<double>& depths, std::size_t samples,
+                                              std::size_t phase) {
   const std::size_t count = depths.size();
   if (count == 0) return {};
   std::vector<std::size_t> order(count);
@@ -63,7 +64,8 @@ std::vector<std::size_t> depth_strata_indices(const std::vector<double>& depths,
   const std::size_t begins[3] = {0, cut1, cut2}, ends[3] = {cut1, cut2, count};
   std::vector<std::size_t> selected;
   for (int third = 0; third < 3; ++third)
-    for (std::size_t r = begins[third]; r < ends[third]; r += strides[third]) selected.push_back(order[r]);
+    for (std::size_t r = begins[third] + phase % strides[third]; r < ends[third]; r += strides[third])
+      selected.push_back(order[r]);
   return selected;
 }
 
@@ -206,7 +208,7 @@ GaussianMixture mixture_from_model(const Gaussians& model, const Camera& referen
   model.validate();
   const std::vector<std::size_t> indices =
       options.samples == 0 ? all_indices(model.size())
-                           : depth_strata_indices(imr_depths(model, reference), options.samples);
+                           : depth_strata_indices(imr_depths(model, reference), options.samples, options.phase);
   return mixture_from_model(model, indices, options.sanitize);
 }
 

@@ -41,7 +41,11 @@ std::vector<double> imr_depths(const Gaussians& model, const Camera& reference);
 // at the first rank of its third. Returns the selected model indices, nearest third first, each third in
 // ascending depth. The count is only approximately `samples` (e.g. N = 30 000, samples = 10 000 gives
 // 2 000 + 3 334 + 10 000), as in the release. Empty input gives an empty selection.
-std::vector<std::size_t> depth_strata_indices(const std::vector<double>& depths, std::size_t samples);
+// `phase` k ≠ 0 starts each third's stride at rank (first rank + k mod stride) instead: another subsample of
+// the same rule, for measuring how much IMR depends on which components the strides happen to take (k = 0
+// is the release's).
+std::vector<std::size_t> depth_strata_indices(const std::vector<double>& depths, std::size_t samples,
+                                              std::size_t phase = 0);
 
 // Floor on covariance eigenvalues used by the release: (1e-3 · sqrt(max_k max_d Σ_k[d][d]))², the largest
 // diagonal entry taken over all given components.
@@ -65,6 +69,7 @@ std::size_t sanitize_covariances(std::vector<glm::dmat3>& covariances, double fl
 
 struct MixtureOptions {
   std::size_t samples = 10000;  // n of the depth strata; 0 keeps every Gaussian (no subsampling)
+  std::size_t phase = 0;        // depth_strata_indices' phase (0 = the release's subsample)
   bool sanitize = true;         // symmetrise and clamp eigenvalues (release)
 };
 
