@@ -3,6 +3,7 @@
 // and runs record what they used.
 #include <gtest/gtest.h>
 
+#include <cstdlib>
 #include <sstream>
 #include <string>
 
@@ -11,6 +12,7 @@
 
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
+#include "d2gs/render/cpu/composite_tiles.hpp"
 #include "d2gs/render/cuda/device.hpp"
 #include "d2gs/render/device_choice.hpp"
 #include "test_paths.hpp"
@@ -110,6 +112,23 @@ TEST(DeviceCli, TrainRenderEvalTakeTheFlag) {
   EXPECT_EQ(config["device"], "auto");
   EXPECT_EQ(config["device_used"], "cpu");
   EXPECT_EQ(nlohmann::json::parse(read_file(dir / "run/results.json"))["device"], "cpu");
+  // The tile loops' level is recorded (runs at different levels round differently): the widest this CPU runs,
+  // or the one D2GS_CPU_ISA names.
+  const char* isa_env = std::getenv("D2GS_CPU_ISA");
+  const std::string level = isa_env && *isa_env ? isa_env : render::cpu::available_tile_isas().back();
+  EXPECT_EQ(config["cpu_tile_level"], level);
+  EXPECT_EQ(nlohmann::json::parse(read_file(dir / "run/results.json"))["cpu_tile_level"], level);
+  {  // and D2GS_CPU_ISA's choice is what is recorded (the child process inherits the variable)
+    const std::string saved = isa_env ? isa_env : "";
+    ::setenv("D2GS_CPU_ISA", "baseline", 1);
+    const auto base = test::run_cli(fmt::format("-q train -s '{}' -m '{}' -r 8 --n-views 3 --init random --random-points 300 "
+                                                "--iterations 2", fern(), (dir / "baseline").string()));
+    if (isa_env) ::setenv("D2GS_CPU_ISA", saved.c_str(), 1);
+    else ::unsetenv("D2GS_CPU_ISA");
+    ASSERT_EQ(base.exit_code, 0) << base.output;
+    EXPECT_EQ(nlohmann::json::parse(read_file(dir / "baseline/config.json"))["cpu_tile_level"], "baseline");
+    EXPECT_EQ(nlohmann::json::parse(read_file(dir / "baseline/results.json"))["cpu_tile_level"], "baseline");
+  }
   // A saved config.json is a valid --config (device_used is recorded, not an option).
   const auto again = test::run_cli(fmt::format("-q train --config '{}' -m '{}' --device cpu",
                                                (dir / "run/config.json").string(), (dir / "again").string()));

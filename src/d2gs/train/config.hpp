@@ -119,7 +119,8 @@ struct TrainConfig {
 
 // The keys a run's config.json records beside the options (the split, the scene extent, the device used, ...): a
 // --config file or an experiment may hold them, and they are not read back as options.
-inline constexpr const char* kRecordedKeys[] = {"init_is_oracle", "scene_extent", "split", "images_folder", "device_used"};
+inline constexpr const char* kRecordedKeys[] = {"init_is_oracle", "scene_extent", "split",
+                                                "images_folder",  "device_used",  "cpu_tile_level"};
 
 // How the run's scene is loaded (resolution, background, image source) and split into views.
 SceneLoadOptions scene_load_options(const TrainConfig& c);

@@ -1,6 +1,7 @@
 #include "d2gs/train/outputs.hpp"
 
 #include "d2gs/core/atomic_file.hpp"
+#include "d2gs/render/cpu/composite_tiles.hpp"
 
 namespace d2gs {
 namespace fs = std::filesystem;
@@ -14,6 +15,8 @@ void write_run_config(const fs::path& model_dir, const TrainConfig& cfg, const S
   j["split"] = {{"train", split.train}, {"test", split.test}};
   j["images_folder"] = scene.images_folder;
   j["device_used"] = render::to_string(device_used);
+  // The CPU's tile loops round by their lane width: the same seed gives the same run only at the same level.
+  if (device_used == render::Device::Cpu) j["cpu_tile_level"] = render::cpu::selected_tile_isa();
   write_file_atomic(model_dir / "config.json", j.dump(2));
 }
 
@@ -45,6 +48,7 @@ nlohmann::json write_results_json(const fs::path& model_dir, const EvalSummary& 
   if (run.train_seconds) j["train_seconds"] = *run.train_seconds;
   j["init_is_oracle"] = run.init_is_oracle;
   if (!run.device.empty()) j["device"] = run.device;
+  if (run.device == "cpu") j["cpu_tile_level"] = render::cpu::selected_tile_isa();
   j["image_source"] = to_string(scene.image_source);
   j["images_folder"] = scene.images_folder;
   write_file_atomic(model_dir / "results.json", j.dump(2));

@@ -100,6 +100,7 @@ void select_tile_isa(const std::string& name) {
 }
 
 const TileKernels<float>& tile_kernels_float() { return *choice().kernels; }
+std::string selected_tile_isa() { return tile_kernels_float().isa; }
 const TileKernels<double>& tile_kernels_double() { return baseline::kernels_double(); }
 
 namespace {

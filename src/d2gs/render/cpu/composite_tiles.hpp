@@ -40,6 +40,9 @@ std::vector<std::string> available_tile_isas();
 // Selects a level by name for the rest of the process (benchmarks and tests comparing levels); throws
 // d2gs::Error when the level is not compiled in or the CPU cannot run it.
 void select_tile_isa(const std::string& name);
+// The level the float tile loops use now ("baseline", "avx2" or "avx512"). Runs at different levels round
+// differently, so a training run records it (config.json, results.json) beside its seed.
+std::string selected_tile_isa();
 
 // Per level, defined in composite_tiles_<level>.cpp.
 namespace baseline {
