@@ -119,11 +119,12 @@ TEST(DeviceCli, TrainRenderEvalTakeTheFlag) {
   EXPECT_EQ(config["cpu_tile_level"], level);
   EXPECT_EQ(nlohmann::json::parse(read_file(dir / "run/results.json"))["cpu_tile_level"], level);
   {  // and D2GS_CPU_ISA's choice is what is recorded (the child process inherits the variable)
-    const std::string saved = isa_env ? isa_env : "";
+    const bool had_env = isa_env != nullptr;  // setenv may invalidate isa_env: keep what it said
+    const std::string saved = had_env ? isa_env : "";
     ::setenv("D2GS_CPU_ISA", "baseline", 1);
     const auto base = test::run_cli(fmt::format("-q train -s '{}' -m '{}' -r 8 --n-views 3 --init random --random-points 300 "
                                                 "--iterations 2", fern(), (dir / "baseline").string()));
-    if (isa_env) ::setenv("D2GS_CPU_ISA", saved.c_str(), 1);
+    if (had_env) ::setenv("D2GS_CPU_ISA", saved.c_str(), 1);
     else ::unsetenv("D2GS_CPU_ISA");
     ASSERT_EQ(base.exit_code, 0) << base.output;
     EXPECT_EQ(nlohmann::json::parse(read_file(dir / "baseline/config.json"))["cpu_tile_level"], "baseline");
