@@ -110,6 +110,14 @@ Run add_init_command(CLI::App& app) {
   cmd->add_option("--pm-filter-min-ncc", pm.filter_min_ncc,
                   "PatchMatch: smallest NCC of a source that confirms a depth (COLMAP's filter_min_ncc)")
       ->capture_default_str();
+  cmd->add_option("--pm-filter-min-distinctiveness", pm.filter_min_distinctiveness,
+                  "PatchMatch: smallest rise of a confirming source's cost (1 - NCC) when the match moves "
+                  "--pm-filter-distinct-px either way along its epipolar line (0: off; ours, not COLMAP's): drops "
+                  "depths the images do not determine (no texture across the epipolar line)")
+      ->capture_default_str();
+  cmd->add_option("--pm-filter-distinct-px", pm.filter_distinct_shift_px,
+                  "PatchMatch: the shift (pixels) of the distinctiveness test (the window radius)")
+      ->capture_default_str();
   cmd->add_option("--fusion-min-pixels", o->geometry.patch_match_fusion.min_pixels,
                   "PatchMatch fusion: pixels (across views) a fused point needs")
       ->capture_default_str();

@@ -535,6 +535,14 @@ TEST(PatchMatch, BadInputsGiveOneLineErrors) {
   bad.filter_min_ncc = 1.5;
   expect_error([&] { (void)patch_match_stereo(v.cam_ptrs(), v.image_ptrs(), v.ranges, bad); },
                "smallest NCC must be in [-1, 1], got 1.5");
+  bad = quick_options();
+  bad.filter_min_distinctiveness = -0.1;
+  expect_error([&] { (void)patch_match_stereo(v.cam_ptrs(), v.image_ptrs(), v.ranges, bad); },
+               "smallest distinctiveness must be in [0, 2], got -0.1");
+  bad = quick_options();
+  bad.filter_distinct_shift_px = 0.0;
+  expect_error([&] { (void)patch_match_stereo(v.cam_ptrs(), v.image_ptrs(), v.ranges, bad); },
+               "distinctiveness shift must be in (0, 100] px, got 0");
 }
 
 // The filter's triangulation angle (d2gs init --pm-filter-min-angle): 0 keeps every depth the sources
@@ -555,6 +563,87 @@ TEST(PatchMatch, FilterAngleOnlyRemovesDepths) {
     EXPECT_GT(none[i], 0u) << i;
     EXPECT_LE(some[i], none[i]) << i;
     EXPECT_EQ(all[i], 0u) << i;
+  }
+}
+
+// The distinctiveness test (d2gs init --pm-filter-min-distinctiveness): two cameras with a horizontal
+// baseline see a fronto-parallel plane whose left half has horizontal stripes (intensity varies with height
+// only: every depth matches along the horizontal epipolar lines) and whose right half has a 2D texture.
+// With the test, the stripes keep (almost) no depth and the texture keeps most of its depths; off, it
+// changes nothing.
+TEST(PatchMatch, DistinctivenessDropsDepthsThatTheEpipolarLineDoesNotDetermine) {
+  constexpr int W = 160, H = 120;
+  constexpr double kPlaneZ = 10.0;
+  Rng rng(7);
+  constexpr int G = 64;  // value noise on a 0.15-unit grid (about 2 px at the plane's depth)
+  std::vector<double> grid(G * G);
+  for (auto& g : grid) g = rng.uniform();
+  const auto texture = [&](double X, double Y) {
+    if (X < 0.0) return 0.5 + 0.35 * std::sin(2.0 * M_PI * Y / 0.4);
+    const double gx = std::clamp(X / 0.15 + 4.0, 0.0, G - 1.001), gy = std::clamp(Y / 0.15 + G / 2.0, 0.0, G - 1.001);
+    const int ix = static_cast<int>(gx), iy = static_cast<int>(gy);
+    const double fx = gx - ix, fy = gy - iy;
+    const auto at = [&](int x, int y) { return grid[static_cast<std::size_t>(y) * G + x]; };
+    return 0.15 + 0.7 * ((1 - fy) * ((1 - fx) * at(ix, iy) + fx * at(ix + 1, iy)) +
+                         fy * ((1 - fx) * at(ix, iy + 1) + fx * at(ix + 1, iy + 1)));
+  };
+  std::vector<Camera> cams(2);
+  std::vector<Image> images;
+  for (int k = 0; k < 2; ++k) {
+    Camera& c = cams[static_cast<std::size_t>(k)];
+    c.image_name = fmt::format("view{}", k);
+    c.width = W, c.height = H, c.fx = c.fy = 150.0, c.cx = W / 2.0, c.cy = H / 2.0;
+    c.t_world_to_cam = glm::dvec3(-0.8 * k, 0.0, 0.0);  // centres at x = 0 and x = 0.8
+    Image im(W, H, 3);
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x) {
+        const double X = (x + 0.5 - c.cx) / c.fx * kPlaneZ + 0.8 * k, Y = (y + 0.5 - c.cy) / c.fy * kPlaneZ;
+        for (int ch = 0; ch < 3; ++ch) im.at(x, y, ch) = static_cast<float>(texture(X, Y));
+      }
+    images.push_back(std::move(im));
+  }
+  const std::vector<const Camera*> cp = {&cams[0], &cams[1]};
+  const std::vector<const Image*> ip = {&images[0], &images[1]};
+  const std::vector<std::pair<double, double>> ranges(2, {5.0, 20.0});
+  PatchMatchOptions o = quick_options();
+  o.levels = 1, o.iterations = 4, o.fine_iterations = 0;
+  const auto off = patch_match_stereo(cp, ip, ranges, o);
+  o.filter_min_distinctiveness = 0.1;
+  const auto on = patch_match_stereo(cp, ip, ranges, o);
+  // The reference view 0: world X = (x + 0.5 − 80)/15; stripes left of x ≈ 75, texture right of it; a margin
+  // of a window (5 px) and of the other view's overlap (12 px of disparity at the right edge) apart.
+  const auto count = [&](const PatchMatchMap& m, int x0, int x1, std::size_t& accurate) {
+    std::size_t kept = 0;
+    accurate = 0;
+    for (int y = 8; y < H - 8; ++y)
+      for (int x = x0; x < x1; ++x) {
+        const float z = m.depth.depth[static_cast<std::size_t>(y) * W + x];
+        if (!(z > 0.0f)) continue;
+        ++kept;
+        accurate += std::abs(150.0 * 0.8 * (1.0 / z - 1.0 / kPlaneZ)) < 0.5;
+      }
+    return kept;
+  };
+  std::size_t acc_off_stripes, acc_on_stripes, acc_off_texture, acc_on_texture;
+  const std::size_t off_stripes = count(off[0], 8, 68, acc_off_stripes), on_stripes = count(on[0], 8, 68, acc_on_stripes);
+  const std::size_t off_texture = count(off[0], 84, 140, acc_off_texture), on_texture = count(on[0], 84, 140, acc_on_texture);
+  const std::size_t stripes_area = 60 * (H - 16), texture_area = 56 * (H - 16);
+  std::printf("distinctiveness: stripes %zu -> %zu kept (%zu, %zu within 0.5 px), texture %zu -> %zu (%zu, %zu) of %zu, %zu px\n",
+              off_stripes, on_stripes, acc_off_stripes, acc_on_stripes, off_texture, on_texture, acc_off_texture,
+              acc_on_texture, stripes_area, texture_area);
+  // Without the test the stripes keep depths, most of them wrong: the cameras cannot tell them apart.
+  EXPECT_GT(off_stripes, stripes_area / 10);
+  EXPECT_LT(acc_off_stripes, off_stripes / 2);
+  // With it they keep almost none, and the texture keeps most of its (right) depths.
+  EXPECT_LT(on_stripes, stripes_area / 100);
+  EXPECT_GT(off_texture, texture_area / 2);
+  EXPECT_GT(on_texture, off_texture * 8 / 10);
+  EXPECT_GT(acc_on_texture, on_texture * 9 / 10);
+  // It only removes depths: every kept depth is the one kept without it.
+  for (std::size_t p = 0; p < on[0].depth.depth.size(); ++p) {
+    if (on[0].depth.depth[p] > 0.0f) {
+      ASSERT_EQ(on[0].depth.depth[p], off[0].depth.depth[p]) << p;
+    }
   }
 }
 

@@ -585,9 +585,46 @@ public:
       if (geometric_error(v, src, *maps[static_cast<std::size_t>(src.view)], sv.width, sv.height, x, y, z,
                           static_cast<float>(o_.geom_max_px)) > static_cast<float>(o_.filter_geom_max_px))
         continue;
+      if (o_.filter_min_distinctiveness > 0.0 &&
+          distinctiveness(v, src, x, y, z, st.normal[i]) < static_cast<float>(o_.filter_min_distinctiveness))
+        continue;
       ++agree;
     }
     return agree;
+  }
+
+  // The smallest rise of the source's cost when the match moves filter_distinct_shift_px either way along
+  // its epipolar line: the plane (z, n) of pixel (x, y) moved along the pixel's ray by the depth step that
+  // shifts the point's projection in the source by that many pixels (to first order). kMaxCost − cost when
+  // a moved plane leaves the source image or goes behind a camera (a match at the border is not judged
+  // ambiguous by what cannot be seen).
+  float distinctiveness(const View& v, const Source& s, int x, int y, float z, const glm::vec3& n) const {
+    RefPatch patch;
+    make_ref_patch(window_, v.grey, x, y, patch);
+    if (!patch.textured) return 0.0f;
+    const Image& src = views_[static_cast<std::size_t>(s.view)].grey;
+    const auto project = [&](float depth, glm::vec2& u) {
+      const glm::vec3 Xs = s.R * (depth * v.ray(x, y)) + s.t;
+      if (!(Xs.z > 0.0f)) return false;
+      u = {s.fx * Xs.x / Xs.z + s.cx, s.fy * Xs.y / Xs.z + s.cy};
+      return true;
+    };
+    glm::vec2 u0, u1;
+    const float dz = 1e-3f * z;
+    if (!project(z, u0) || !project(z + dz, u1)) return 0.0f;
+    const float px_per_depth = glm::length(u1 - u0) / dz;
+    if (!(px_per_depth > 0.0f)) return 0.0f;  // the ray projects to a point: no epipolar line
+    const float step = static_cast<float>(o_.filter_distinct_shift_px) / px_per_depth;
+    float h[9];
+    homography(v, s, x, y, z, n, h);
+    const float c0 = patch_cost(patch, src, h, x, y);
+    float rise = kMaxCost;
+    for (const float zs : {z - step, z + step}) {
+      if (!(zs > 0.0f) || !(std::abs(glm::dot(n, zs * v.ray(x, y))) > 0.0f)) continue;
+      homography(v, s, x, y, zs, n, h);
+      rise = std::min(rise, patch_cost(patch, src, h, x, y) - c0);
+    }
+    return rise;
   }
 
 private:
@@ -866,6 +903,10 @@ void validate(const PatchMatchOptions& o) {
   if (o.filter_min_consistent < 0) fail("patch match: filter_min_consistent must be ≥ 0");
   if (!(o.filter_geom_max_px > 0))
     fail("patch match: the filter's largest forward-backward error must be positive, got {} px", o.filter_geom_max_px);
+  if (!(o.filter_min_distinctiveness >= 0 && o.filter_min_distinctiveness <= kMaxCost))
+    fail("patch match: the filter's smallest distinctiveness must be in [0, 2], got {}", o.filter_min_distinctiveness);
+  if (!(o.filter_distinct_shift_px > 0 && o.filter_distinct_shift_px <= 100))
+    fail("patch match: the distinctiveness shift must be in (0, 100] px, got {}", o.filter_distinct_shift_px);
   if (!(o.filter_min_ncc >= -1 && o.filter_min_ncc <= 1))
     fail("patch match: the filter's smallest NCC must be in [-1, 1], got {}", o.filter_min_ncc);
   if (!(o.filter_min_triangulation_angle_deg >= 0 && o.filter_min_triangulation_angle_deg < 90))

@@ -66,6 +66,17 @@ struct PatchMatchOptions {
   double filter_min_triangulation_angle_deg = 0.0;
   double filter_geom_max_px = 1.0;
   int filter_min_consistent = 1;
+  // Distinctiveness (ours, not COLMAP's; 0: off): a source agrees only if its cost rises by at least this
+  // much (in 1 − NCC) when the match moves `filter_distinct_shift_px` pixels either way along the epipolar
+  // line in that source (the plane moved along the pixel's ray, its normal kept). A window with no texture
+  // across the epipolar line (a uniform surface, an edge parallel to the baseline) matches equally well at
+  // neighbouring depths, so its depth is not determined by the images: the curvature confidence of stereo
+  // matching (Hu & Mordohai, TPAMI 2012), evaluated on the final plane. The shift is the window's radius: a
+  // window that still matches a radius away has no structure across the line at its own scale (at 2 px the
+  // test also drops the faint, low-frequency texture of walls, whose planes propagation got right:
+  // docs/benchmarks.md).
+  double filter_min_distinctiveness = 0.0;
+  double filter_distinct_shift_px = 5.0;
   std::uint64_t seed = 0;
 };
 

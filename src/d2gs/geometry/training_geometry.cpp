@@ -111,6 +111,9 @@ std::string options_key(const TrainingGeometryOptions& o, int training_resolutio
                         {"filter_min_triangulation_angle_deg", p.filter_min_triangulation_angle_deg},
                         {"filter_geom_max_px", p.filter_geom_max_px},
                         {"filter_min_consistent", p.filter_min_consistent}};
+    // Recorded only when on, so that the inits cached before the option existed keep their key.
+    if (p.filter_min_distinctiveness > 0.0)
+      j["patch_match"]["filter_min_distinctiveness"] = {p.filter_min_distinctiveness, p.filter_distinct_shift_px};
     j["patch_match_fusion"] = {{"max_reprojection_px", f.max_reprojection_px},
                                {"max_relative_depth", f.max_relative_depth},
                                {"max_normal_deg", f.max_normal_deg},

@@ -49,6 +49,8 @@ struct TrainConfig {
   std::string init_dense_method = "patchmatch";
   // PatchMatch fusion's colour test (patch_match_fusion.hpp, max_color_difference): 0 = off; SGBM ignores it
   double init_color_filter = 0.10;
+  // PatchMatch's distinctiveness test (patch_match.hpp, filter_min_distinctiveness): 0 = off
+  double init_pm_distinctiveness = 0.0;
   int random_points = 10000;
 
   // optimisation

@@ -378,6 +378,12 @@ std::vector<TrainOption> declare() {
                       "--fusion-max-color-difference`; docs/training.md)"},
                      [](auto& c) -> auto& { return c.init_color_filter; }, closed(0.0, 1.0)));
   t.back().absent_means = 0.0;  // added off (2ce5087), on by default since 6ffbd09
+  t.push_back(number({"init_pm_distinctiveness", init,
+                      "PatchMatch of --init dense: keep a depth only where a confirming source's cost (1 - NCC) rises "
+                      "by at least this much when the match moves a window radius along its epipolar line: drops "
+                      "depths the images do not determine (0: off; as `d2gs init --pm-filter-min-distinctiveness`; "
+                      "docs/training.md)"},
+                     [](auto& c) -> auto& { return c.init_pm_distinctiveness; }, closed(0.0, 2.0)));
   t.push_back(number({"random_points", init,
                       "Point count of --init random (random pixel rays of the training views, uniform inverse depth "
                       "within the scene's depth bounds: docs/training.md)"},
