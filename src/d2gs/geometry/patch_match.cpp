@@ -6,6 +6,7 @@
 #include <cstring>
 #include <limits>
 #include <numeric>
+#include <optional>
 
 #if defined(__x86_64__) && defined(__GNUC__)
 #include <immintrin.h>
@@ -576,6 +577,7 @@ public:
     const float z = st.depth[i];
     if (!(z > 0.0f)) return 0;
     const glm::vec3 X = z * v.ray(x, y);
+    std::optional<RefPatch> patch;  // the reference window of the distinctiveness test, built once per pixel
     int agree = 0;
     for (std::size_t s = 0; s < S; ++s) {
       const Source& src = v.sources[s];
@@ -585,9 +587,11 @@ public:
       if (geometric_error(v, src, *maps[static_cast<std::size_t>(src.view)], sv.width, sv.height, x, y, z,
                           static_cast<float>(o_.geom_max_px)) > static_cast<float>(o_.filter_geom_max_px))
         continue;
-      if (o_.filter_min_distinctiveness > 0.0 &&
-          distinctiveness(v, src, x, y, z, st.normal[i]) < static_cast<float>(o_.filter_min_distinctiveness))
-        continue;
+      if (o_.filter_min_distinctiveness > 0.0) {
+        if (!patch) make_ref_patch(window_, v.grey, x, y, patch.emplace());
+        if (distinctiveness(*patch, v, src, x, y, z, st.normal[i]) < static_cast<float>(o_.filter_min_distinctiveness))
+          continue;
+      }
       ++agree;
     }
     return agree;
@@ -597,10 +601,9 @@ public:
   // its epipolar line: the plane (z, n) of pixel (x, y) moved along the pixel's ray by the depth step that
   // shifts the point's projection in the source by that many pixels (to first order). kMaxCost − cost when
   // a moved plane leaves the source image or goes behind a camera (a match at the border is not judged
-  // ambiguous by what cannot be seen).
-  float distinctiveness(const View& v, const Source& s, int x, int y, float z, const glm::vec3& n) const {
-    RefPatch patch;
-    make_ref_patch(window_, v.grey, x, y, patch);
+  // ambiguous by what cannot be seen). `patch` is the pixel's reference window (make_ref_patch's).
+  float distinctiveness(const RefPatch& patch, const View& v, const Source& s, int x, int y, float z,
+                        const glm::vec3& n) const {
     if (!patch.textured) return 0.0f;
     const Image& src = views_[static_cast<std::size_t>(s.view)].grey;
     const auto project = [&](float depth, glm::vec2& u) {
