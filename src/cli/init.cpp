@@ -118,6 +118,10 @@ Run add_init_command(CLI::App& app) {
   cmd->add_option("--pm-filter-distinct-px", pm.filter_distinct_shift_px,
                   "PatchMatch: the shift (pixels) of the distinctiveness test (the window radius)")
       ->capture_default_str();
+  cmd->add_flag("--pm-filter-distinct-aperture", pm.filter_distinct_aperture,
+                "PatchMatch: the distinctiveness test drops a depth only where the window has structure across "
+                "the epipolar line (its cost also rises by the threshold when the match moves the same shift "
+                "perpendicular to the line: the aperture problem), not where it is flat in every direction");
   cmd->add_option("--fusion-min-pixels", o->geometry.patch_match_fusion.min_pixels,
                   "PatchMatch fusion: pixels (across views) a fused point needs")
       ->capture_default_str();

@@ -543,6 +543,10 @@ TEST(PatchMatch, BadInputsGiveOneLineErrors) {
   bad.filter_distinct_shift_px = 0.0;
   expect_error([&] { (void)patch_match_stereo(v.cam_ptrs(), v.image_ptrs(), v.ranges, bad); },
                "distinctiveness shift must be in (0, 100] px, got 0");
+  bad = quick_options();
+  bad.filter_distinct_aperture = true;
+  expect_error([&] { (void)patch_match_stereo(v.cam_ptrs(), v.image_ptrs(), v.ranges, bad); },
+               "aperture mode of the distinctiveness test needs its threshold");
 }
 
 // The filter's triangulation angle (d2gs init --pm-filter-min-angle): 0 keeps every depth the sources
@@ -566,85 +570,144 @@ TEST(PatchMatch, FilterAngleOnlyRemovesDepths) {
   }
 }
 
-// The distinctiveness test (d2gs init --pm-filter-min-distinctiveness): two cameras with a horizontal
-// baseline see a fronto-parallel plane whose left half has horizontal stripes (intensity varies with height
-// only: every depth matches along the horizontal epipolar lines) and whose right half has a 2D texture.
-// With the test, the stripes keep (almost) no depth and the texture keeps most of its depths; off, it
-// changes nothing.
-TEST(PatchMatch, DistinctivenessDropsDepthsThatTheEpipolarLineDoesNotDetermine) {
-  constexpr int W = 160, H = 120;
-  constexpr double kPlaneZ = 10.0;
-  Rng rng(7);
-  constexpr int G = 64;  // value noise on a 0.15-unit grid (about 2 px at the plane's depth)
-  std::vector<double> grid(G * G);
-  for (auto& g : grid) g = rng.uniform();
-  const auto texture = [&](double X, double Y) {
-    if (X < 0.0) return 0.5 + 0.35 * std::sin(2.0 * M_PI * Y / 0.4);
+// Two cameras with a horizontal baseline (centres at x = 0 and 0.8, f = 150 px, 160×120) looking at the
+// fronto-parallel plane z = 10 painted with texture(X, Y): the scene of the distinctiveness tests.
+struct PlanePair {
+  static constexpr int W = 160, H = 120;
+  static constexpr double kPlaneZ = 10.0;
+  std::vector<Camera> cams = std::vector<Camera>(2);
+  std::vector<Image> images;
+  std::vector<std::pair<double, double>> ranges = std::vector<std::pair<double, double>>(2, {5.0, 20.0});
+
+  template <class Texture> explicit PlanePair(const Texture& texture) {
+    for (int k = 0; k < 2; ++k) {
+      Camera& c = cams[static_cast<std::size_t>(k)];
+      c.image_name = fmt::format("view{}", k);
+      c.width = W, c.height = H, c.fx = c.fy = 150.0, c.cx = W / 2.0, c.cy = H / 2.0;
+      c.t_world_to_cam = glm::dvec3(-0.8 * k, 0.0, 0.0);
+      Image im(W, H, 3);
+      for (int y = 0; y < H; ++y)
+        for (int x = 0; x < W; ++x) {
+          const double X = (x + 0.5 - c.cx) / c.fx * kPlaneZ + 0.8 * k, Y = (y + 0.5 - c.cy) / c.fy * kPlaneZ;
+          for (int ch = 0; ch < 3; ++ch) im.at(x, y, ch) = static_cast<float>(texture(X, Y));
+        }
+      images.push_back(std::move(im));
+    }
+  }
+  std::vector<PatchMatchMap> stereo(const PatchMatchOptions& o) const {
+    return patch_match_stereo({&cams[0], &cams[1]}, {&images[0], &images[1]}, ranges, o);
+  }
+  // Depths of view 0 kept in columns [x0, x1) and rows [y0, y1); `accurate`: those within 0.5 px of disparity.
+  static std::size_t kept(const PatchMatchMap& m, int x0, int x1, int y0, int y1, std::size_t& accurate) {
+    std::size_t n = 0;
+    accurate = 0;
+    for (int y = y0; y < y1; ++y)
+      for (int x = x0; x < x1; ++x) {
+        const float z = m.depth.depth[static_cast<std::size_t>(y) * W + x];
+        if (!(z > 0.0f)) continue;
+        ++n;
+        accurate += std::abs(150.0 * 0.8 * (1.0 / z - 1.0 / kPlaneZ)) < 0.5;
+      }
+    return n;
+  }
+};
+
+// Value noise on a 0.15-unit grid (about 2 px at the plane's depth), in [0.15, 0.85].
+struct ValueNoise {
+  static constexpr int G = 64;
+  std::vector<double> grid = std::vector<double>(G * G);
+  explicit ValueNoise(std::uint64_t seed) {
+    Rng rng(seed);
+    for (auto& g : grid) g = rng.uniform();
+  }
+  double operator()(double X, double Y) const {
     const double gx = std::clamp(X / 0.15 + 4.0, 0.0, G - 1.001), gy = std::clamp(Y / 0.15 + G / 2.0, 0.0, G - 1.001);
     const int ix = static_cast<int>(gx), iy = static_cast<int>(gy);
     const double fx = gx - ix, fy = gy - iy;
     const auto at = [&](int x, int y) { return grid[static_cast<std::size_t>(y) * G + x]; };
     return 0.15 + 0.7 * ((1 - fy) * ((1 - fx) * at(ix, iy) + fx * at(ix + 1, iy)) +
                          fy * ((1 - fx) * at(ix, iy + 1) + fx * at(ix + 1, iy + 1)));
-  };
-  std::vector<Camera> cams(2);
-  std::vector<Image> images;
-  for (int k = 0; k < 2; ++k) {
-    Camera& c = cams[static_cast<std::size_t>(k)];
-    c.image_name = fmt::format("view{}", k);
-    c.width = W, c.height = H, c.fx = c.fy = 150.0, c.cx = W / 2.0, c.cy = H / 2.0;
-    c.t_world_to_cam = glm::dvec3(-0.8 * k, 0.0, 0.0);  // centres at x = 0 and x = 0.8
-    Image im(W, H, 3);
-    for (int y = 0; y < H; ++y)
-      for (int x = 0; x < W; ++x) {
-        const double X = (x + 0.5 - c.cx) / c.fx * kPlaneZ + 0.8 * k, Y = (y + 0.5 - c.cy) / c.fy * kPlaneZ;
-        for (int ch = 0; ch < 3; ++ch) im.at(x, y, ch) = static_cast<float>(texture(X, Y));
-      }
-    images.push_back(std::move(im));
   }
-  const std::vector<const Camera*> cp = {&cams[0], &cams[1]};
-  const std::vector<const Image*> ip = {&images[0], &images[1]};
-  const std::vector<std::pair<double, double>> ranges(2, {5.0, 20.0});
+};
+
+// The distinctiveness test (d2gs init --pm-filter-min-distinctiveness): the plane's left half has horizontal
+// stripes (intensity varies with height only: every depth matches along the horizontal epipolar lines), its
+// right half a 2D texture. With the test, the stripes keep (almost) no depth and the texture keeps most of
+// its depths; off, it changes nothing. The aperture mode judges the stripes the same way: they have
+// structure across the epipolar line.
+TEST(PatchMatch, DistinctivenessDropsDepthsThatTheEpipolarLineDoesNotDetermine) {
+  constexpr int H = PlanePair::H;
+  const ValueNoise noise(7);
+  const PlanePair scene([&](double X, double Y) { return X < 0.0 ? 0.5 + 0.35 * std::sin(2.0 * M_PI * Y / 0.4) : noise(X, Y); });
   PatchMatchOptions o = quick_options();
   o.levels = 1, o.iterations = 4, o.fine_iterations = 0;
-  const auto off = patch_match_stereo(cp, ip, ranges, o);
+  const auto off = scene.stereo(o);
   o.filter_min_distinctiveness = 0.1;
-  const auto on = patch_match_stereo(cp, ip, ranges, o);
+  const auto on = scene.stereo(o);
+  o.filter_distinct_aperture = true;
+  const auto aperture = scene.stereo(o);
   // The reference view 0: world X = (x + 0.5 − 80)/15; stripes left of x ≈ 75, texture right of it; a margin
   // of a window (5 px) and of the other view's overlap (12 px of disparity at the right edge) apart.
-  const auto count = [&](const PatchMatchMap& m, int x0, int x1, std::size_t& accurate) {
-    std::size_t kept = 0;
-    accurate = 0;
-    for (int y = 8; y < H - 8; ++y)
-      for (int x = x0; x < x1; ++x) {
-        const float z = m.depth.depth[static_cast<std::size_t>(y) * W + x];
-        if (!(z > 0.0f)) continue;
-        ++kept;
-        accurate += std::abs(150.0 * 0.8 * (1.0 / z - 1.0 / kPlaneZ)) < 0.5;
-      }
-    return kept;
-  };
-  std::size_t acc_off_stripes, acc_on_stripes, acc_off_texture, acc_on_texture;
-  const std::size_t off_stripes = count(off[0], 8, 68, acc_off_stripes), on_stripes = count(on[0], 8, 68, acc_on_stripes);
-  const std::size_t off_texture = count(off[0], 84, 140, acc_off_texture), on_texture = count(on[0], 84, 140, acc_on_texture);
+  std::size_t acc_off_stripes, acc_on_stripes, acc_ap_stripes, acc_off_texture, acc_on_texture, acc_ap_texture;
+  const std::size_t off_stripes = PlanePair::kept(off[0], 8, 68, 8, H - 8, acc_off_stripes),
+                    on_stripes = PlanePair::kept(on[0], 8, 68, 8, H - 8, acc_on_stripes),
+                    ap_stripes = PlanePair::kept(aperture[0], 8, 68, 8, H - 8, acc_ap_stripes);
+  const std::size_t off_texture = PlanePair::kept(off[0], 84, 140, 8, H - 8, acc_off_texture),
+                    on_texture = PlanePair::kept(on[0], 84, 140, 8, H - 8, acc_on_texture),
+                    ap_texture = PlanePair::kept(aperture[0], 84, 140, 8, H - 8, acc_ap_texture);
   const std::size_t stripes_area = 60 * (H - 16), texture_area = 56 * (H - 16);
-  std::printf("distinctiveness: stripes %zu -> %zu kept (%zu, %zu within 0.5 px), texture %zu -> %zu (%zu, %zu) of %zu, %zu px\n",
-              off_stripes, on_stripes, acc_off_stripes, acc_on_stripes, off_texture, on_texture, acc_off_texture,
-              acc_on_texture, stripes_area, texture_area);
+  std::printf("distinctiveness: stripes %zu -> %zu kept, aperture %zu (%zu, %zu, %zu within 0.5 px), texture %zu -> "
+              "%zu, aperture %zu (%zu, %zu, %zu) of %zu, %zu px\n",
+              off_stripes, on_stripes, ap_stripes, acc_off_stripes, acc_on_stripes, acc_ap_stripes, off_texture,
+              on_texture, ap_texture, acc_off_texture, acc_on_texture, acc_ap_texture, stripes_area, texture_area);
   // Without the test the stripes keep depths, most of them wrong: the cameras cannot tell them apart.
   EXPECT_GT(off_stripes, stripes_area / 10);
   EXPECT_LT(acc_off_stripes, off_stripes / 2);
   // With it they keep almost none, and the texture keeps most of its (right) depths.
   EXPECT_LT(on_stripes, stripes_area / 100);
+  EXPECT_LT(ap_stripes, stripes_area / 100);
   EXPECT_GT(off_texture, texture_area / 2);
   EXPECT_GT(on_texture, off_texture * 8 / 10);
   EXPECT_GT(acc_on_texture, on_texture * 9 / 10);
+  EXPECT_GE(ap_texture, on_texture);
   // It only removes depths: every kept depth is the one kept without it.
-  for (std::size_t p = 0; p < on[0].depth.depth.size(); ++p) {
-    if (on[0].depth.depth[p] > 0.0f) {
-      ASSERT_EQ(on[0].depth.depth[p], off[0].depth.depth[p]) << p;
+  for (const auto* m : {&on, &aperture})
+    for (std::size_t p = 0; p < off[0].depth.depth.size(); ++p) {
+      if ((*m)[0].depth.depth[p] > 0.0f) {
+        ASSERT_EQ((*m)[0].depth.depth[p], off[0].depth.depth[p]) << p;
+      }
     }
-  }
+}
+
+// The aperture mode (--pm-filter-distinct-aperture): the plane's left half is shaded smoothly (intensity
+// linear in X: a window shifted any way along or across the horizontal epipolar lines is the same window
+// plus a constant, NCC 1), its right half textured. The plain test drops whatever depths the shading kept,
+// the aperture mode keeps exactly the depths kept without the test there (flat in every direction: the
+// plane is propagation's), and both keep the texture.
+TEST(PatchMatch, DistinctivenessApertureModeKeepsWindowsFlatInEveryDirection) {
+  constexpr int H = PlanePair::H;
+  const ValueNoise noise(11);
+  const PlanePair scene([&](double X, double Y) { return X < 0.0 ? 0.8 + 0.1 * X : noise(X, Y); });
+  PatchMatchOptions o = quick_options();
+  o.levels = 1, o.iterations = 4, o.fine_iterations = 0;
+  const auto off = scene.stereo(o);
+  o.filter_min_distinctiveness = 0.1;
+  const auto on = scene.stereo(o);
+  o.filter_distinct_aperture = true;
+  const auto aperture = scene.stereo(o);
+  std::size_t a0, a1, a2, t0, t1, t2;
+  const std::size_t off_shade = PlanePair::kept(off[0], 8, 68, 8, H - 8, a0), on_shade = PlanePair::kept(on[0], 8, 68, 8, H - 8, a1),
+                    ap_shade = PlanePair::kept(aperture[0], 8, 68, 8, H - 8, a2);
+  const std::size_t off_texture = PlanePair::kept(off[0], 84, 140, 8, H - 8, t0),
+                    on_texture = PlanePair::kept(on[0], 84, 140, 8, H - 8, t1),
+                    ap_texture = PlanePair::kept(aperture[0], 84, 140, 8, H - 8, t2);
+  std::printf("aperture: shading %zu -> %zu kept, aperture %zu; texture %zu -> %zu, aperture %zu\n", off_shade, on_shade,
+              ap_shade, off_texture, on_texture, ap_texture);
+  EXPECT_GT(off_shade, std::size_t{100});
+  EXPECT_LT(on_shade, off_shade / 10);
+  EXPECT_EQ(ap_shade, off_shade);
+  EXPECT_GT(on_texture, off_texture * 8 / 10);
+  EXPECT_GE(ap_texture, on_texture);
 }
 
 TEST(TrainingGeometry, PatchMatchPipelineReadsOnlyTrainingViewsAndLiesOnTheSurfaces) {

@@ -589,12 +589,27 @@ public:
         continue;
       if (o_.filter_min_distinctiveness > 0.0) {
         if (!patch) make_ref_patch(window_, v.grey, x, y, patch.emplace());
-        if (distinctiveness(*patch, v, src, x, y, z, st.normal[i]) < static_cast<float>(o_.filter_min_distinctiveness))
-          continue;
+        if (determination(*patch, v, src, x, y, z, st.normal[i]) == Determination::Undetermined) continue;
       }
       ++agree;
     }
     return agree;
+  }
+
+  // What source s says of the depth of pixel (x, y) (the distinctiveness test): Determined when its cost
+  // rises by at least filter_min_distinctiveness as the match moves filter_distinct_shift_px either way along
+  // its epipolar line; otherwise Undetermined, except in aperture mode where a window whose cost does not
+  // rise either when the match moves the same shift across the line (or that has no texture) is Flat,
+  // which confirms the depth as Determined does.
+  enum class Determination { Determined, Flat, Undetermined };
+  Determination determination(const RefPatch& patch, const View& v, const Source& s, int x, int y, float z,
+                              const glm::vec3& n) const {
+    const float t = static_cast<float>(o_.filter_min_distinctiveness);
+    if (o_.filter_distinct_aperture && !patch.textured) return Determination::Flat;
+    glm::vec2 along{0.0f};
+    if (distinctiveness(patch, v, s, x, y, z, n, &along) >= t) return Determination::Determined;
+    if (!o_.filter_distinct_aperture || along == glm::vec2{0.0f}) return Determination::Undetermined;
+    return cross_rise(patch, v, s, x, y, z, n, along) >= t ? Determination::Undetermined : Determination::Flat;
   }
 
   // The smallest rise of the source's cost when the match moves filter_distinct_shift_px either way along
@@ -602,8 +617,9 @@ public:
   // shifts the point's projection in the source by that many pixels (to first order). kMaxCost − cost when
   // a moved plane leaves the source image or goes behind a camera (a match at the border is not judged
   // ambiguous by what cannot be seen). `patch` is the pixel's reference window (make_ref_patch's).
+  // `direction`, when given, receives the unit direction of the epipolar line at the match (0 when none).
   float distinctiveness(const RefPatch& patch, const View& v, const Source& s, int x, int y, float z,
-                        const glm::vec3& n) const {
+                        const glm::vec3& n, glm::vec2* direction = nullptr) const {
     if (!patch.textured) return 0.0f;
     const Image& src = views_[static_cast<std::size_t>(s.view)].grey;
     const auto project = [&](float depth, glm::vec2& u) {
@@ -617,6 +633,7 @@ public:
     if (!project(z, u0) || !project(z + dz, u1)) return 0.0f;
     const float px_per_depth = glm::length(u1 - u0) / dz;
     if (!(px_per_depth > 0.0f)) return 0.0f;  // the ray projects to a point: no epipolar line
+    if (direction) *direction = (u1 - u0) / (px_per_depth * dz);
     const float step = static_cast<float>(o_.filter_distinct_shift_px) / px_per_depth;
     float h[9];
     homography(v, s, x, y, z, n, h);
@@ -626,6 +643,29 @@ public:
       if (!(zs > 0.0f) || !(std::abs(glm::dot(n, zs * v.ray(x, y))) > 0.0f)) continue;
       homography(v, s, x, y, zs, n, h);
       rise = std::min(rise, patch_cost(patch, src, h, x, y) - c0);
+    }
+    return rise;
+  }
+
+  // The smallest rise of the source's cost when the match moves filter_distinct_shift_px either way
+  // perpendicular to the epipolar line (unit direction `along` in the source): the plane's homography
+  // followed by that translation of the source image. kMaxCost − cost when the moved window leaves the image.
+  float cross_rise(const RefPatch& patch, const View& v, const Source& s, int x, int y, float z,
+                   const glm::vec3& n, glm::vec2 along) const {
+    const Image& src = views_[static_cast<std::size_t>(s.view)].grey;
+    float h[9], g[9];
+    homography(v, s, x, y, z, n, h);
+    const float c0 = patch_cost(patch, src, h, x, y);
+    const float shift = static_cast<float>(o_.filter_distinct_shift_px);
+    float rise = kMaxCost;
+    for (const float sign : {-1.0f, 1.0f}) {
+      const glm::vec2 d = sign * shift * glm::vec2(-along.y, along.x);
+      for (int c = 0; c < 3; ++c) {
+        g[c] = h[c] + d.x * h[6 + c];
+        g[3 + c] = h[3 + c] + d.y * h[6 + c];
+        g[6 + c] = h[6 + c];
+      }
+      rise = std::min(rise, patch_cost(patch, src, g, x, y) - c0);
     }
     return rise;
   }
@@ -910,6 +950,9 @@ void validate(const PatchMatchOptions& o) {
     fail("patch match: the filter's smallest distinctiveness must be in [0, 2], got {}", o.filter_min_distinctiveness);
   if (!(o.filter_distinct_shift_px > 0 && o.filter_distinct_shift_px <= 100))
     fail("patch match: the distinctiveness shift must be in (0, 100] px, got {}", o.filter_distinct_shift_px);
+  if (o.filter_distinct_aperture && !(o.filter_min_distinctiveness > 0.0))
+    fail("patch match: the aperture mode of the distinctiveness test needs its threshold "
+         "(--pm-filter-min-distinctiveness > 0)");
   if (!(o.filter_min_ncc >= -1 && o.filter_min_ncc <= 1))
     fail("patch match: the filter's smallest NCC must be in [-1, 1], got {}", o.filter_min_ncc);
   if (!(o.filter_min_triangulation_angle_deg >= 0 && o.filter_min_triangulation_angle_deg < 90))

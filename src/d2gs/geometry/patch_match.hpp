@@ -77,6 +77,12 @@ struct PatchMatchOptions {
   // docs/benchmarks.md).
   double filter_min_distinctiveness = 0.0;
   double filter_distinct_shift_px = 5.0;
+  // Aperture mode of the distinctiveness test: a source rejects an undetermined depth only when its window
+  // has structure across the epipolar line, i.e. its cost also rises by at least filter_min_distinctiveness
+  // when the match moves the same shift perpendicular to the line (an edge or bar parallel to the baseline:
+  // the aperture problem). A window flat in every direction (a uniform or smoothly shaded wall, on which
+  // NCC sees nothing at the window's scale) keeps the plane that propagation gave it.
+  bool filter_distinct_aperture = false;
   std::uint64_t seed = 0;
 };
 

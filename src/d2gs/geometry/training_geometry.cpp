@@ -114,6 +114,8 @@ std::string options_key(const TrainingGeometryOptions& o, int training_resolutio
     // Recorded only when on, so that the inits cached before the option existed keep their key.
     if (p.filter_min_distinctiveness > 0.0)
       j["patch_match"]["filter_min_distinctiveness"] = {p.filter_min_distinctiveness, p.filter_distinct_shift_px};
+    if (p.filter_min_distinctiveness > 0.0 && p.filter_distinct_aperture)
+      j["patch_match"]["filter_distinct_aperture"] = true;
     j["patch_match_fusion"] = {{"max_reprojection_px", f.max_reprojection_px},
                                {"max_relative_depth", f.max_relative_depth},
                                {"max_normal_deg", f.max_normal_deg},
