@@ -597,6 +597,21 @@ struct PlanePair {
   std::vector<PatchMatchMap> stereo(const PatchMatchOptions& o) const {
     return patch_match_stereo({&cams[0], &cams[1]}, {&images[0], &images[1]}, ranges, o);
   }
+  // The maps without the distinctiveness test, with it (T = 0.1, S = 5 px) and in its aperture mode.
+  struct Modes {
+    std::vector<PatchMatchMap> off, on, aperture;
+  };
+  Modes distinctiveness_modes() const {
+    PatchMatchOptions o = quick_options();
+    o.levels = 1, o.iterations = 4, o.fine_iterations = 0;
+    Modes m;
+    m.off = stereo(o);
+    o.filter_min_distinctiveness = 0.1;
+    m.on = stereo(o);
+    o.filter_distinct_aperture = true;
+    m.aperture = stereo(o);
+    return m;
+  }
   // Depths of view 0 kept in columns [x0, x1) and rows [y0, y1); `accurate`: those within 0.5 px of disparity.
   static std::size_t kept(const PatchMatchMap& m, int x0, int x1, int y0, int y1, std::size_t& accurate) {
     std::size_t n = 0;
@@ -639,13 +654,7 @@ TEST(PatchMatch, DistinctivenessDropsDepthsThatTheEpipolarLineDoesNotDetermine) 
   constexpr int H = PlanePair::H;
   const ValueNoise noise(7);
   const PlanePair scene([&](double X, double Y) { return X < 0.0 ? 0.5 + 0.35 * std::sin(2.0 * M_PI * Y / 0.4) : noise(X, Y); });
-  PatchMatchOptions o = quick_options();
-  o.levels = 1, o.iterations = 4, o.fine_iterations = 0;
-  const auto off = scene.stereo(o);
-  o.filter_min_distinctiveness = 0.1;
-  const auto on = scene.stereo(o);
-  o.filter_distinct_aperture = true;
-  const auto aperture = scene.stereo(o);
+  const auto [off, on, aperture] = scene.distinctiveness_modes();
   // The reference view 0: world X = (x + 0.5 − 80)/15; stripes left of x ≈ 75, texture right of it; a margin
   // of a window (5 px) and of the other view's overlap (12 px of disparity at the right edge) apart.
   std::size_t acc_off_stripes, acc_on_stripes, acc_ap_stripes, acc_off_texture, acc_on_texture, acc_ap_texture;
@@ -688,13 +697,7 @@ TEST(PatchMatch, DistinctivenessApertureModeKeepsWindowsFlatInEveryDirection) {
   constexpr int H = PlanePair::H;
   const ValueNoise noise(11);
   const PlanePair scene([&](double X, double Y) { return X < 0.0 ? 0.8 + 0.1 * X : noise(X, Y); });
-  PatchMatchOptions o = quick_options();
-  o.levels = 1, o.iterations = 4, o.fine_iterations = 0;
-  const auto off = scene.stereo(o);
-  o.filter_min_distinctiveness = 0.1;
-  const auto on = scene.stereo(o);
-  o.filter_distinct_aperture = true;
-  const auto aperture = scene.stereo(o);
+  const auto [off, on, aperture] = scene.distinctiveness_modes();
   std::size_t a0, a1, a2, t0, t1, t2;
   const std::size_t off_shade = PlanePair::kept(off[0], 8, 68, 8, H - 8, a0), on_shade = PlanePair::kept(on[0], 8, 68, 8, H - 8, a1),
                     ap_shade = PlanePair::kept(aperture[0], 8, 68, 8, H - 8, a2);
