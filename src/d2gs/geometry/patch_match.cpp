@@ -606,10 +606,10 @@ public:
                               const glm::vec3& n) const {
     const float t = static_cast<float>(o_.filter_min_distinctiveness);
     if (o_.filter_distinct_aperture && !patch.textured) return Determination::Flat;
-    glm::vec2 along{0.0f};
-    if (distinctiveness(patch, v, s, x, y, z, n, &along) >= t) return Determination::Determined;
-    if (!o_.filter_distinct_aperture || along == glm::vec2{0.0f}) return Determination::Undetermined;
-    return cross_rise(patch, v, s, x, y, z, n, along) >= t ? Determination::Undetermined : Determination::Flat;
+    Match match;
+    if (distinctiveness(patch, v, s, x, y, z, n, &match) >= t) return Determination::Determined;
+    if (!o_.filter_distinct_aperture || !match.valid) return Determination::Undetermined;
+    return cross_rise(patch, s, match) >= t ? Determination::Undetermined : Determination::Flat;
   }
 
   // The smallest rise of the source's cost when the match moves filter_distinct_shift_px either way along
@@ -617,9 +617,17 @@ public:
   // shifts the point's projection in the source by that many pixels (to first order). kMaxCost − cost when
   // a moved plane leaves the source image or goes behind a camera (a match at the border is not judged
   // ambiguous by what cannot be seen). `patch` is the pixel's reference window (make_ref_patch's).
-  // `direction`, when given, receives the unit direction of the epipolar line at the match (0 when none).
+  // `match`, when given, receives the unmoved plane's homography, cost and epipolar direction (valid only
+  // when the line exists).
+  struct Match {
+    bool valid = false;
+    int x = 0, y = 0;
+    float h[9]{};
+    float cost = 0.0f;
+    glm::vec2 along{0.0f};  // unit direction of the epipolar line in the source at the match
+  };
   float distinctiveness(const RefPatch& patch, const View& v, const Source& s, int x, int y, float z,
-                        const glm::vec3& n, glm::vec2* direction = nullptr) const {
+                        const glm::vec3& n, Match* match = nullptr) const {
     if (!patch.textured) return 0.0f;
     const Image& src = views_[static_cast<std::size_t>(s.view)].grey;
     const auto project = [&](float depth, glm::vec2& u) {
@@ -633,11 +641,15 @@ public:
     if (!project(z, u0) || !project(z + dz, u1)) return 0.0f;
     const float px_per_depth = glm::length(u1 - u0) / dz;
     if (!(px_per_depth > 0.0f)) return 0.0f;  // the ray projects to a point: no epipolar line
-    if (direction) *direction = (u1 - u0) / (px_per_depth * dz);
     const float step = static_cast<float>(o_.filter_distinct_shift_px) / px_per_depth;
     float h[9];
     homography(v, s, x, y, z, n, h);
     const float c0 = patch_cost(patch, src, h, x, y);
+    if (match) {
+      match->valid = true, match->x = x, match->y = y, match->cost = c0;
+      std::copy(h, h + 9, match->h);
+      match->along = (u1 - u0) / (px_per_depth * dz);
+    }
     float rise = kMaxCost;
     for (const float zs : {z - step, z + step}) {
       if (!(zs > 0.0f) || !(std::abs(glm::dot(n, zs * v.ray(x, y))) > 0.0f)) continue;
@@ -648,24 +660,20 @@ public:
   }
 
   // The smallest rise of the source's cost when the match moves filter_distinct_shift_px either way
-  // perpendicular to the epipolar line (unit direction `along` in the source): the plane's homography
-  // followed by that translation of the source image. kMaxCost − cost when the moved window leaves the image.
-  float cross_rise(const RefPatch& patch, const View& v, const Source& s, int x, int y, float z,
-                   const glm::vec3& n, glm::vec2 along) const {
+  // perpendicular to the epipolar line: the unmoved plane's homography (`m`, from distinctiveness) followed by
+  // that translation of the source image. kMaxCost − cost when the moved window leaves the image.
+  float cross_rise(const RefPatch& patch, const Source& s, const Match& m) const {
     const Image& src = views_[static_cast<std::size_t>(s.view)].grey;
-    float h[9], g[9];
-    homography(v, s, x, y, z, n, h);
-    const float c0 = patch_cost(patch, src, h, x, y);
     const float shift = static_cast<float>(o_.filter_distinct_shift_px);
-    float rise = kMaxCost;
+    float g[9], rise = kMaxCost;
     for (const float sign : {-1.0f, 1.0f}) {
-      const glm::vec2 d = sign * shift * glm::vec2(-along.y, along.x);
+      const glm::vec2 d = sign * shift * glm::vec2(-m.along.y, m.along.x);
       for (int c = 0; c < 3; ++c) {
-        g[c] = h[c] + d.x * h[6 + c];
-        g[3 + c] = h[3 + c] + d.y * h[6 + c];
-        g[6 + c] = h[6 + c];
+        g[c] = m.h[c] + d.x * m.h[6 + c];
+        g[3 + c] = m.h[3 + c] + d.y * m.h[6 + c];
+        g[6 + c] = m.h[6 + c];
       }
-      rise = std::min(rise, patch_cost(patch, src, g, x, y) - c0);
+      rise = std::min(rise, patch_cost(patch, src, g, m.x, m.y) - m.cost);
     }
     return rise;
   }
