@@ -122,6 +122,11 @@ Run add_init_command(CLI::App& app) {
                 "PatchMatch: the distinctiveness test drops a depth only where the window has structure across "
                 "the epipolar line (its cost also rises by the threshold when the match moves the same shift "
                 "perpendicular to the line: the aperture problem), not where it is flat in every direction");
+  cmd->add_option("--pm-filter-min-uniqueness", pm.filter_min_uniqueness,
+                  "PatchMatch: smallest margin (in 1 - NCC) by which a confirming source's match must beat every "
+                  "other match on its epipolar line more than two window radii away (0: off; ours, not COLMAP's): "
+                  "drops depths that a repeated pattern, a reflection or a uniform region leaves ambiguous")
+      ->capture_default_str();
   cmd->add_option("--fusion-min-pixels", o->geometry.patch_match_fusion.min_pixels,
                   "PatchMatch fusion: pixels (across views) a fused point needs")
       ->capture_default_str();

@@ -547,6 +547,10 @@ TEST(PatchMatch, BadInputsGiveOneLineErrors) {
   bad.filter_distinct_aperture = true;
   expect_error([&] { (void)patch_match_stereo(v.cam_ptrs(), v.image_ptrs(), v.ranges, bad); },
                "aperture mode of the distinctiveness test needs its threshold");
+  bad = quick_options();
+  bad.filter_min_uniqueness = 2.5;
+  expect_error([&] { (void)patch_match_stereo(v.cam_ptrs(), v.image_ptrs(), v.ranges, bad); },
+               "smallest uniqueness must be in [0, 2], got 2.5");
 }
 
 // The filter's triangulation angle (d2gs init --pm-filter-min-angle): 0 keeps every depth the sources
@@ -711,6 +715,55 @@ TEST(PatchMatch, DistinctivenessApertureModeKeepsWindowsFlatInEveryDirection) {
   EXPECT_EQ(ap_shade, off_shade);
   EXPECT_GT(on_texture, off_texture * 8 / 10);
   EXPECT_GE(ap_texture, on_texture);
+}
+
+// The uniqueness test (d2gs init --pm-filter-min-uniqueness): vertical stripes of period 40 px (intensity
+// periodic in X, along the horizontal epipolar lines) over the whole plane, and a depth range (2 to 40:
+// disparities 3 to 60 px, the plane at 12) that holds a second match of every window one period away (52 px),
+// far beyond two window radii: the cameras cannot tell the two apart (PatchMatch happens to settle on the
+// right one), and the test drops most of the depths. On a 2D texture with the same range it keeps most
+// depths. It only removes depths. (The period is wide because the line is sampled about every window radius:
+// a rival match narrower than that can fall between two samples, and some stripe windows near the
+// sine's extremes keep their depth that way.)
+TEST(PatchMatch, UniquenessDropsDepthsThatARepeatedPatternLeavesAmbiguous) {
+  constexpr int H = PlanePair::H;
+  constexpr double kPeriod = 40.0 / 15.0;  // 40 px at the plane's depth (15 px per unit)
+  const auto maps = [](const PlanePair& scene, double unique) {
+    PatchMatchOptions o = quick_options();
+    o.levels = 1, o.iterations = 4, o.fine_iterations = 0;
+    o.filter_min_uniqueness = unique;
+    return scene.stereo(o);
+  };
+  PlanePair stripes([&](double X, double) { return 0.5 + 0.35 * std::sin(2.0 * M_PI * X / kPeriod); });
+  const ValueNoise noise(5);
+  PlanePair texture([&](double X, double Y) { return noise(X, Y); });
+  stripes.ranges.assign(2, {2.0, 40.0});
+  texture.ranges.assign(2, {2.0, 40.0});
+  const auto off = maps(stripes, 0.0), on = maps(stripes, 0.1);
+  const auto t_off = maps(texture, 0.0), t_on = maps(texture, 0.1);
+  // Columns [64, 150) of view 0: both matches (12 and 52 px to the left) lie inside view 1 with a window.
+  std::size_t a_off, a_on, a_t_off, a_t_on;
+  const std::size_t n_off = PlanePair::kept(off[0], 64, 150, 8, H - 8, a_off),
+                    n_on = PlanePair::kept(on[0], 64, 150, 8, H - 8, a_on),
+                    n_t_off = PlanePair::kept(t_off[0], 64, 150, 8, H - 8, a_t_off),
+                    n_t_on = PlanePair::kept(t_on[0], 64, 150, 8, H - 8, a_t_on);
+  const std::size_t area = 86 * (H - 16);
+  std::printf("uniqueness: stripes %zu kept (%zu within 0.5 px) -> %zu (%zu); texture %zu (%zu) -> %zu (%zu), of %zu px\n",
+              n_off, a_off, n_on, a_on, n_t_off, a_t_off, n_t_on, a_t_on, area);
+  // Without the test the stripes keep their depths; with it they lose most of them, and the texture keeps
+  // most of its depths, nearly all of them right.
+  EXPECT_GT(n_off, area / 2);
+  EXPECT_LT(n_on, n_off / 4);
+  EXPECT_GT(n_t_off, area / 2);
+  EXPECT_GT(n_t_on, n_t_off * 8 / 10);
+  EXPECT_GT(a_t_on, n_t_on * 9 / 10);
+  for (const auto* pair : {&off, &t_off}) {
+    const auto& m = pair == &off ? on : t_on;
+    for (std::size_t p = 0; p < m[0].depth.depth.size(); ++p)
+      if (m[0].depth.depth[p] > 0.0f) {
+        ASSERT_EQ(m[0].depth.depth[p], (*pair)[0].depth.depth[p]) << p;
+      }
+  }
 }
 
 TEST(TrainingGeometry, PatchMatchPipelineReadsOnlyTrainingViewsAndLiesOnTheSurfaces) {

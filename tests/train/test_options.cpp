@@ -109,7 +109,8 @@ TEST(TrainCli, RangeErrorsNameFlagsThatExist) {
            {"--opacity-noise-sigma 1", "option --opacity-noise-sigma must be in [0, 1) (got 1)"},
            {"--opacity-decay-factor 0", "option --opacity-decay-factor must be in (0, 1] (got 0)"},
            {"--init-color-filter 1.5", "option --init-color-filter must be in [0, 1] (got 1.5)"},
-           {"--init-pm-distinctiveness 3", "option --init-pm-distinctiveness must be in [0, 2] (got 3)"}}) {
+           {"--init-pm-distinctiveness 3", "option --init-pm-distinctiveness must be in [0, 2] (got 3)"},
+           {"--init-pm-uniqueness -0.5", "option --init-pm-uniqueness must be in [0, 2] (got -0.5)"}}) {
     const auto r = test::run_cli(fmt::format("train -s '{}' -m '{}' {}", fern, (dir / "run").string(), args));
     EXPECT_EQ(r.exit_code, 1) << args << "\n" << r.output;
     EXPECT_NE(r.output.find("d2gs: error: " + expected), std::string::npos) << args << "\n" << r.output;

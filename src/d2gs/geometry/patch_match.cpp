@@ -571,8 +571,9 @@ public:
   void set_geometric(const std::vector<const std::vector<float>*>& maps) { geo_maps_ = maps; }
 
   // Number of sources agreeing with the pixel's plane (the filter).
+  // `scratch`: the uniqueness test's cost batch (one per thread, not per pixel).
   int consistent_sources(const View& v, const State& st, int x, int y, const std::vector<const std::vector<float>*>& maps,
-                         float cos_filter_angle) const {
+                         float cos_filter_angle, CostBatch& scratch) const {
     const std::size_t i = static_cast<std::size_t>(y) * v.width + x, S = v.sources.size();
     const float z = st.depth[i];
     if (!(z > 0.0f)) return 0;
@@ -591,9 +592,58 @@ public:
         if (!patch) make_ref_patch(window_, v.grey, x, y, patch.emplace());
         if (determination(*patch, v, src, x, y, z, st.normal[i]) == Determination::Undetermined) continue;
       }
+      if (o_.filter_min_uniqueness > 0.0) {
+        if (!patch) make_ref_patch(window_, v.grey, x, y, patch.emplace());
+        if (uniqueness(*patch, v, src, x, y, z, st.normal[i], scratch) < static_cast<float>(o_.filter_min_uniqueness))
+          continue;
+      }
       ++agree;
     }
     return agree;
+  }
+
+  // The uniqueness test: the lowest cost of the plane (z, n) of pixel (x, y) moved along the pixel's ray to
+  // depths whose match in source s lies more than two window radii from the kept one, minus the kept plane's
+  // cost. The depths: N + 1 uniform in inverse depth over the view's depth range, N the line's length in
+  // the source over the window radius (400 when an end of the range lies behind the source). kMaxCost − cost
+  // when no such depth can be scored (a match that nothing else on the line rivals).
+  float uniqueness(const RefPatch& patch, const View& v, const Source& s, int x, int y, float z, const glm::vec3& n,
+                   CostBatch& batch) const {
+    if (!patch.textured) return 0.0f;
+    const glm::vec3 ray = v.ray(x, y);
+    const auto project = [&](float depth, glm::vec2& u) {
+      const glm::vec3 Xs = s.R * (depth * ray) + s.t;
+      if (!(Xs.z > 0.0f)) return false;
+      u = {s.fx * Xs.x / Xs.z + s.cx, s.fy * Xs.y / Xs.z + s.cy};
+      return true;
+    };
+    glm::vec2 u0, far_end, near_end;
+    if (!project(z, u0)) return 0.0f;
+    float h[9];
+    homography(v, s, x, y, z, n, h);
+    const float c0 = patch_cost(patch, views_[static_cast<std::size_t>(s.view)].grey, h, x, y);
+    const float lo = 1.0f / v.depth_max, hi = 1.0f / v.depth_min;  // inverse depths
+    const float r = static_cast<float>(o_.window_radius);
+    constexpr int kMaxSteps = 400;
+    const int N = project(1.0f / lo, far_end) && project(1.0f / hi, near_end)
+                      ? std::clamp(static_cast<int>(glm::length(near_end - far_end) / r) + 1, 2, kMaxSteps)
+                      : kMaxSteps;
+    float lowest = kMaxCost;
+    batch.n = 0;
+    const auto flush = [&] {
+      batch_costs(patch, atlas_, x, y, batch);
+      for (int l = 0; l < batch.n; ++l) lowest = std::min(lowest, batch.cost[static_cast<std::size_t>(l)]);
+      batch.n = 0;
+    };
+    for (int k = 0; k <= N; ++k) {
+      const float zs = 1.0f / (lo + (hi - lo) * static_cast<float>(k) / static_cast<float>(N));
+      glm::vec2 us;
+      if (!project(zs, us) || glm::length(us - u0) <= 2.0f * r) continue;
+      add_pair(batch, v, s, x, y, zs, n);
+      if (batch.n == kMaxPairs) flush();
+    }
+    if (batch.n > 0) flush();
+    return lowest - c0;
   }
 
   // What source s says of the depth of pixel (x, y) (the distinctiveness test): Determined when its cost
@@ -958,6 +1008,8 @@ void validate(const PatchMatchOptions& o) {
     fail("patch match: the filter's smallest distinctiveness must be in [0, 2], got {}", o.filter_min_distinctiveness);
   if (!(o.filter_distinct_shift_px > 0 && o.filter_distinct_shift_px <= 100))
     fail("patch match: the distinctiveness shift must be in (0, 100] px, got {}", o.filter_distinct_shift_px);
+  if (!(o.filter_min_uniqueness >= 0 && o.filter_min_uniqueness <= kMaxCost))
+    fail("patch match: the filter's smallest uniqueness must be in [0, 2], got {}", o.filter_min_uniqueness);
   if (o.filter_distinct_aperture && !(o.filter_min_distinctiveness > 0.0))
     fail("patch match: the aperture mode of the distinctiveness test needs its threshold "
          "(--pm-filter-min-distinctiveness > 0)");
@@ -1202,11 +1254,13 @@ std::vector<PatchMatchMap> patch_match_stereo(const std::vector<const Camera*>& 
     m.normals.assign(np, glm::vec3(0.0f));
     m.cost.assign(np, kMaxCost);
 #pragma omp parallel for schedule(dynamic, 4)
-    for (int y = 0; y < v.height; ++y)
+    for (int y = 0; y < v.height; ++y) {
+      CostBatch scratch;
       for (int x = 0; x < v.width; ++x) {
         const std::size_t p = static_cast<std::size_t>(y) * v.width + x;
         if (st.total[p] >= kMaxCost) continue;  // untextured: never scored
-        if (o.filter_min_consistent > 0 && solver.consistent_sources(v, st, x, y, maps, cos_filter) < o.filter_min_consistent)
+        if (o.filter_min_consistent > 0 &&
+            solver.consistent_sources(v, st, x, y, maps, cos_filter, scratch) < o.filter_min_consistent)
           continue;
         m.depth.depth[p] = st.depth[p];
         m.normals[p] = st.normal[p];
@@ -1214,6 +1268,7 @@ std::vector<PatchMatchMap> patch_match_stereo(const std::vector<const Camera*>& 
         for (std::size_t s = 0; s < v.sources.size(); ++s) c += st.src_cost[p * v.sources.size() + s];
         m.cost[p] = c / static_cast<float>(v.sources.size());
       }
+    }
   }
   return out;
 }

@@ -83,6 +83,16 @@ struct PatchMatchOptions {
   // the aperture problem). A window flat in every direction (a uniform or smoothly shaded wall, on which
   // NCC sees nothing at the window's scale) keeps the plane that propagation gave it.
   bool filter_distinct_aperture = false;
+  // Uniqueness (ours, not COLMAP's; 0: off): a source agrees only if every other match on its epipolar line,
+  // more than two window radii from the kept one, costs at least this much more (in 1 − NCC): the plane moved
+  // along the pixel's ray, its normal kept, sampled uniformly in inverse depth over the view's depth range at
+  // about one sample per window radius of the line (a rival narrower than that can fall between two samples:
+  // a coarse search for the broad ambiguities that cost most). A match that a repeated pattern, a reflection over a
+  // transmitted scene or a uniform region lets the source make elsewhere as well is not determined by the
+  // images: the second-minimum confidence of stereo matching (the peak ratio of Hu & Mordohai, TPAMI 2012;
+  // SGBM's uniqueness ratio), on the final plane. Where the distinctiveness test looks a radius either
+  // side of the match, this one looks along the rest of the line.
+  double filter_min_uniqueness = 0.0;
   std::uint64_t seed = 0;
 };
 

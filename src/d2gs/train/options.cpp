@@ -384,6 +384,13 @@ std::vector<TrainOption> declare() {
                       "depths the images do not determine (0: off; as `d2gs init --pm-filter-min-distinctiveness`; "
                       "docs/training.md)"},
                      [](auto& c) -> auto& { return c.init_pm_distinctiveness; }, closed(0.0, 2.0)));
+  t.push_back(number({"init_pm_uniqueness", init,
+                      "PatchMatch of --init dense: keep a depth only where a confirming source's match beats every "
+                      "other match on its epipolar line (more than two window radii away) by at least this much in "
+                      "1 - NCC: drops depths that repeated patterns, reflections or uniform regions leave ambiguous "
+                      "(0: off; as `d2gs init --pm-filter-min-uniqueness`; docs/training.md)"},
+                     [](auto& c) -> auto& { return c.init_pm_uniqueness; }, closed(0.0, 2.0)));
+  t.back().absent_means = 0.0;  // runs recorded before the option existed trained without the test
   t.push_back(number({"random_points", init,
                       "Point count of --init random (random pixel rays of the training views, uniform inverse depth "
                       "within the scene's depth bounds: docs/training.md)"},

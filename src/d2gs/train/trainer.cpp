@@ -258,6 +258,7 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
     go.dense_method = parse_dense_method(s.cfg.init_dense_method);
     go.patch_match_fusion.max_color_difference = s.cfg.init_color_filter;
     go.patch_match.filter_min_distinctiveness = s.cfg.init_pm_distinctiveness;
+    go.patch_match.filter_min_uniqueness = s.cfg.init_pm_uniqueness;
     return obtain_training_geometry(s.scene, s.split.train, go, geometry_dirs, s.out() / "init");
   };
   if (s.cfg.init == "dense" || s.cfg.init == "sparse") {
