@@ -51,8 +51,8 @@ struct TrainConfig {
   double init_color_filter = 0.10;
   // PatchMatch's distinctiveness test (patch_match.hpp, filter_min_distinctiveness): 0 = off
   double init_pm_distinctiveness = 0.0;
-  // PatchMatch's uniqueness test (patch_match.hpp, filter_min_uniqueness): 0 = off
-  double init_pm_uniqueness = 0.0;
+  // PatchMatch's uniqueness test (patch_match.hpp, filter_min_uniqueness): 0 = off; on (0.1) by default since issue 22
+  double init_pm_uniqueness = 0.1;
   int random_points = 10000;
 
   // optimisation

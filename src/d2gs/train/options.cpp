@@ -390,7 +390,7 @@ std::vector<TrainOption> declare() {
                       "1 - NCC: drops depths that repeated patterns, reflections or uniform regions leave ambiguous "
                       "(0: off; as `d2gs init --pm-filter-min-uniqueness`; docs/training.md)"},
                      [](auto& c) -> auto& { return c.init_pm_uniqueness; }, closed(0.0, 2.0)));
-  t.back().absent_means = 0.0;  // runs recorded before the option existed trained without the test
+  t.back().absent_means = 0.0;  // runs recorded before the option existed trained without the test (on since issue 22)
   t.push_back(number({"random_points", init,
                       "Point count of --init random (random pixel rays of the training views, uniform inverse depth "
                       "within the scene's depth bounds: docs/training.md)"},
