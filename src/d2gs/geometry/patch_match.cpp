@@ -602,6 +602,14 @@ public:
     return agree;
   }
 
+  // The projection in source s of the point at `depth` on a reference ray; false behind the source.
+  static bool project_on_ray(const Source& s, const glm::vec3& ray, float depth, glm::vec2& u) {
+    const glm::vec3 Xs = s.R * (depth * ray) + s.t;
+    if (!(Xs.z > 0.0f)) return false;
+    u = {s.fx * Xs.x / Xs.z + s.cx, s.fy * Xs.y / Xs.z + s.cy};
+    return true;
+  }
+
   // The uniqueness test: the lowest cost of the plane (z, n) of pixel (x, y) moved along the pixel's ray to
   // depths whose match in source s lies more than two window radii from the kept one, minus the kept plane's
   // cost. The depths: N + 1 uniform in inverse depth over the view's depth range, N the line's length in
@@ -611,12 +619,7 @@ public:
                    CostBatch& batch) const {
     if (!patch.textured) return 0.0f;
     const glm::vec3 ray = v.ray(x, y);
-    const auto project = [&](float depth, glm::vec2& u) {
-      const glm::vec3 Xs = s.R * (depth * ray) + s.t;
-      if (!(Xs.z > 0.0f)) return false;
-      u = {s.fx * Xs.x / Xs.z + s.cx, s.fy * Xs.y / Xs.z + s.cy};
-      return true;
-    };
+    const auto project = [&](float depth, glm::vec2& u) { return project_on_ray(s, ray, depth, u); };
     glm::vec2 u0, far_end, near_end;
     if (!project(z, u0)) return 0.0f;
     float h[9];
@@ -680,12 +683,7 @@ public:
                         const glm::vec3& n, Match* match = nullptr) const {
     if (!patch.textured) return 0.0f;
     const Image& src = views_[static_cast<std::size_t>(s.view)].grey;
-    const auto project = [&](float depth, glm::vec2& u) {
-      const glm::vec3 Xs = s.R * (depth * v.ray(x, y)) + s.t;
-      if (!(Xs.z > 0.0f)) return false;
-      u = {s.fx * Xs.x / Xs.z + s.cx, s.fy * Xs.y / Xs.z + s.cy};
-      return true;
-    };
+    const auto project = [&](float depth, glm::vec2& u) { return project_on_ray(s, v.ray(x, y), depth, u); };
     glm::vec2 u0, u1;
     const float dz = 1e-3f * z;
     if (!project(z, u0) || !project(z + dz, u1)) return 0.0f;

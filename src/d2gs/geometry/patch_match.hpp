@@ -92,7 +92,7 @@ struct PatchMatchOptions {
   // images: the second-minimum confidence of stereo matching (the peak ratio of Hu & Mordohai, TPAMI 2012;
   // SGBM's uniqueness ratio), on the final plane. Where the distinctiveness test looks a radius either
   // side of the match, this one looks along the rest of the line. On by default since issue 22: DropGaussian,
-  // three seeds, horns +0.75 dB, room −0.05, fern +0.05 (docs/benchmarks.md).
+  // three seeds, horns +0.75 dB, room −0.05, fern −0.08 (docs/benchmarks.md).
   double filter_min_uniqueness = 0.1;
   std::uint64_t seed = 0;
 };
