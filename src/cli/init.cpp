@@ -127,6 +127,9 @@ Run add_init_command(CLI::App& app) {
                   "other match on its epipolar line more than two window radii away (0: off; ours, not COLMAP's): "
                   "drops depths that a repeated pattern, a reflection or a uniform region leaves ambiguous")
       ->capture_default_str();
+  cmd->add_option("--pm-filter-uniqueness-step", pm.filter_uniqueness_step,
+                  "PatchMatch: the uniqueness test's sampling interval along the epipolar line, in window radii")
+      ->capture_default_str();
   cmd->add_option("--fusion-min-pixels", o->geometry.patch_match_fusion.min_pixels,
                   "PatchMatch fusion: pixels (across views) a fused point needs")
       ->capture_default_str();

@@ -551,6 +551,10 @@ TEST(PatchMatch, BadInputsGiveOneLineErrors) {
   bad.filter_min_uniqueness = 2.5;
   expect_error([&] { (void)patch_match_stereo(v.cam_ptrs(), v.image_ptrs(), v.ranges, bad); },
                "smallest uniqueness must be in [0, 2], got 2.5");
+  bad = quick_options();
+  bad.filter_uniqueness_step = 0.0;
+  expect_error([&] { (void)patch_match_stereo(v.cam_ptrs(), v.image_ptrs(), v.ranges, bad); },
+               "uniqueness test's step must be in [0.05, 4] window radii, got 0");
 }
 
 // The filter's triangulation angle (d2gs init --pm-filter-min-angle): 0 keeps every depth the sources
@@ -728,10 +732,11 @@ TEST(PatchMatch, DistinctivenessApertureModeKeepsWindowsFlatInEveryDirection) {
 TEST(PatchMatch, UniquenessDropsDepthsThatARepeatedPatternLeavesAmbiguous) {
   constexpr int H = PlanePair::H;
   constexpr double kPeriod = 40.0 / 15.0;  // 40 px at the plane's depth (15 px per unit)
-  const auto maps = [](const PlanePair& scene, double unique) {
+  const auto maps = [](const PlanePair& scene, double unique, double step = 1.0) {
     PatchMatchOptions o = quick_options();
     o.levels = 1, o.iterations = 4, o.fine_iterations = 0;
     o.filter_min_uniqueness = unique;
+    o.filter_uniqueness_step = step;
     return scene.stereo(o);
   };
   PlanePair stripes([&](double X, double) { return 0.5 + 0.35 * std::sin(2.0 * M_PI * X / kPeriod); });
@@ -739,8 +744,8 @@ TEST(PatchMatch, UniquenessDropsDepthsThatARepeatedPatternLeavesAmbiguous) {
   PlanePair texture([&](double X, double Y) { return noise(X, Y); });
   stripes.ranges.assign(2, {2.0, 40.0});
   texture.ranges.assign(2, {2.0, 40.0});
-  const auto off = maps(stripes, 0.0), on = maps(stripes, 0.1);
-  const auto t_off = maps(texture, 0.0), t_on = maps(texture, 0.1);
+  const auto off = maps(stripes, 0.0), on = maps(stripes, 0.1), fine = maps(stripes, 0.1, 0.25);
+  const auto t_off = maps(texture, 0.0), t_on = maps(texture, 0.1), t_fine = maps(texture, 0.1, 0.25);
   // Columns [64, 150) of view 0: both matches (12 and 52 px to the left) lie inside view 1 with a window.
   std::size_t a_off, a_on, a_t_off, a_t_on;
   const std::size_t n_off = PlanePair::kept(off[0], 64, 150, 8, H - 8, a_off),
@@ -757,6 +762,18 @@ TEST(PatchMatch, UniquenessDropsDepthsThatARepeatedPatternLeavesAmbiguous) {
   EXPECT_GT(n_t_off, area / 2);
   EXPECT_GT(n_t_on, n_t_off * 8 / 10);
   EXPECT_GT(a_t_on, n_t_on * 9 / 10);
+  // A search four times finer (--pm-filter-uniqueness-step 0.25) finds the rivals the coarse one stepped over,
+  // and still keeps the texture's depths.
+  std::size_t a_fine, a_t_fine;
+  const std::size_t n_fine = PlanePair::kept(fine[0], 64, 150, 8, H - 8, a_fine),
+                    n_t_fine = PlanePair::kept(t_fine[0], 64, 150, 8, H - 8, a_t_fine);
+  std::printf("uniqueness, a quarter radius apart: stripes %zu kept, texture %zu (%zu)\n", n_fine, n_t_fine, a_t_fine);
+  EXPECT_LT(n_fine, n_on / 2);
+  EXPECT_GT(n_t_fine, n_t_off * 8 / 10);
+  for (std::size_t p = 0; p < fine[0].depth.depth.size(); ++p)
+    if (fine[0].depth.depth[p] > 0.0f) {
+      ASSERT_EQ(fine[0].depth.depth[p], off[0].depth.depth[p]) << p;
+    }
   for (const auto* pair : {&off, &t_off}) {
     const auto& m = pair == &off ? on : t_on;
     for (std::size_t p = 0; p < m[0].depth.depth.size(); ++p)

@@ -613,8 +613,9 @@ public:
   // The uniqueness test: the lowest cost of the plane (z, n) of pixel (x, y) moved along the pixel's ray to
   // depths whose match in source s lies more than two window radii from the kept one, minus the kept plane's
   // cost. The depths: N + 1 uniform in inverse depth over the view's depth range, N the line's length in
-  // the source over the window radius (400 when an end of the range lies behind the source). kMaxCost − cost
-  // when no such depth can be scored (a match that nothing else on the line rivals).
+  // the source over the step (filter_uniqueness_step window radii; 400 / that when an end of the range lies
+  // behind the source). kMaxCost − cost when no such depth can be scored (a match that nothing else on the
+  // line rivals).
   float uniqueness(const RefPatch& patch, const View& v, const Source& s, int x, int y, float z, const glm::vec3& n,
                    CostBatch& batch) const {
     if (!patch.textured) return 0.0f;
@@ -627,10 +628,11 @@ public:
     const float c0 = patch_cost(patch, views_[static_cast<std::size_t>(s.view)].grey, h, x, y);
     const float lo = 1.0f / v.depth_max, hi = 1.0f / v.depth_min;  // inverse depths
     const float r = static_cast<float>(o_.window_radius);
-    constexpr int kMaxSteps = 400;
+    const float step = r * static_cast<float>(o_.filter_uniqueness_step);
+    const int max_steps = static_cast<int>(400.0 / o_.filter_uniqueness_step);
     const int N = project(1.0f / lo, far_end) && project(1.0f / hi, near_end)
-                      ? std::clamp(static_cast<int>(glm::length(near_end - far_end) / r) + 1, 2, kMaxSteps)
-                      : kMaxSteps;
+                      ? std::clamp(static_cast<int>(glm::length(near_end - far_end) / step) + 1, 2, max_steps)
+                      : max_steps;
     float lowest = kMaxCost;
     batch.n = 0;
     const auto flush = [&] {
@@ -1008,6 +1010,8 @@ void validate(const PatchMatchOptions& o) {
     fail("patch match: the distinctiveness shift must be in (0, 100] px, got {}", o.filter_distinct_shift_px);
   if (!(o.filter_min_uniqueness >= 0 && o.filter_min_uniqueness <= kMaxCost))
     fail("patch match: the filter's smallest uniqueness must be in [0, 2], got {}", o.filter_min_uniqueness);
+  if (!(o.filter_uniqueness_step >= 0.05 && o.filter_uniqueness_step <= 4.0))
+    fail("patch match: the uniqueness test's step must be in [0.05, 4] window radii, got {}", o.filter_uniqueness_step);
   if (o.filter_distinct_aperture && !(o.filter_min_distinctiveness > 0.0))
     fail("patch match: the aperture mode of the distinctiveness test needs its threshold "
          "(--pm-filter-min-distinctiveness > 0)");

@@ -86,14 +86,17 @@ struct PatchMatchOptions {
   // Uniqueness (ours, not COLMAP's; 0.1 by default, 0: off): a source agrees only if every other match on its epipolar line,
   // more than two window radii from the kept one, costs at least this much more (in 1 − NCC): the plane moved
   // along the pixel's ray, its normal kept, sampled uniformly in inverse depth over the view's depth range at
-  // about one sample per window radius of the line (a rival narrower than that can fall between two samples:
-  // a coarse search for the broad ambiguities that cost most). A match that a repeated pattern, a reflection over a
+  // about one sample per window radius of the line by default (filter_uniqueness_step; a rival narrower than
+  // the step can fall between two samples: a coarse search for the broad ambiguities that cost most). A match that a repeated pattern, a reflection over a
   // transmitted scene or a uniform region lets the source make elsewhere as well is not determined by the
   // images: the second-minimum confidence of stereo matching (the peak ratio of Hu & Mordohai, TPAMI 2012;
   // SGBM's uniqueness ratio), on the final plane. Where the distinctiveness test looks a radius either
   // side of the match, this one looks along the rest of the line. On by default since issue 22: DropGaussian,
   // three seeds, horns +0.75 dB, room −0.05, fern −0.08 (docs/benchmarks.md).
   double filter_min_uniqueness = 0.1;
+  // The uniqueness test's sampling interval along the epipolar line, in window radii, in [0.05, 4]: 1 is the
+  // default's one sample per radius; a finer step catches narrower rivals at proportionally more cost.
+  double filter_uniqueness_step = 1.0;
   std::uint64_t seed = 0;
 };
 

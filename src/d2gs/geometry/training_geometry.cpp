@@ -117,6 +117,7 @@ std::string options_key(const TrainingGeometryOptions& o, int training_resolutio
     if (p.filter_min_distinctiveness > 0.0 && p.filter_distinct_aperture)
       j["patch_match"]["filter_distinct_aperture"] = true;
     if (p.filter_min_uniqueness > 0.0) j["patch_match"]["filter_min_uniqueness"] = p.filter_min_uniqueness;
+    if (p.filter_uniqueness_step != 1.0) j["patch_match"]["filter_uniqueness_step"] = p.filter_uniqueness_step;
     j["patch_match_fusion"] = {{"max_reprojection_px", f.max_reprojection_px},
                                {"max_relative_depth", f.max_relative_depth},
                                {"max_normal_deg", f.max_normal_deg},
