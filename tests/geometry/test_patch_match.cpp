@@ -770,17 +770,14 @@ TEST(PatchMatch, UniquenessDropsDepthsThatARepeatedPatternLeavesAmbiguous) {
   std::printf("uniqueness, a quarter radius apart: stripes %zu kept, texture %zu (%zu)\n", n_fine, n_t_fine, a_t_fine);
   EXPECT_LT(n_fine, n_on / 2);
   EXPECT_GT(n_t_fine, n_t_off * 8 / 10);
-  for (std::size_t p = 0; p < fine[0].depth.depth.size(); ++p)
-    if (fine[0].depth.depth[p] > 0.0f) {
-      ASSERT_EQ(fine[0].depth.depth[p], off[0].depth.depth[p]) << p;
-    }
-  for (const auto* pair : {&off, &t_off}) {
-    const auto& m = pair == &off ? on : t_on;
-    for (std::size_t p = 0; p < m[0].depth.depth.size(); ++p)
-      if (m[0].depth.depth[p] > 0.0f) {
-        ASSERT_EQ(m[0].depth.depth[p], (*pair)[0].depth.depth[p]) << p;
+  // Every filtered map keeps only depths of the unfiltered one.
+  using Maps = decltype(off);
+  const std::pair<const Maps*, const Maps*> filtered[] = {{&on, &off}, {&fine, &off}, {&t_on, &t_off}};
+  for (const auto& [m, unfiltered] : filtered)
+    for (std::size_t p = 0; p < (*m)[0].depth.depth.size(); ++p)
+      if ((*m)[0].depth.depth[p] > 0.0f) {
+        ASSERT_EQ((*m)[0].depth.depth[p], (*unfiltered)[0].depth.depth[p]) << p;
       }
-  }
 }
 
 TEST(TrainingGeometry, PatchMatchPipelineReadsOnlyTrainingViewsAndLiesOnTheSurfaces) {
