@@ -53,6 +53,8 @@ struct TrainConfig {
   double init_pm_distinctiveness = 0.0;
   // PatchMatch's uniqueness test (patch_match.hpp, filter_min_uniqueness): 0 = off; on (0.1) by default since issue 22
   double init_pm_uniqueness = 0.1;
+  // Its sampling step along the epipolar line, in window radii (patch_match.hpp, filter_uniqueness_step)
+  double init_pm_uniqueness_step = 1.0;
   int random_points = 10000;
 
   // optimisation

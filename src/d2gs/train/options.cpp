@@ -391,6 +391,12 @@ std::vector<TrainOption> declare() {
                       "(0: off; as `d2gs init --pm-filter-min-uniqueness`; docs/training.md)"},
                      [](auto& c) -> auto& { return c.init_pm_uniqueness; }, closed(0.0, 2.0)));
   t.back().absent_means = 0.0;  // runs recorded before the option existed trained without the test (on since issue 22)
+  t.push_back(number({"init_pm_uniqueness_step", init,
+                      "PatchMatch of --init dense: the uniqueness test samples the epipolar line every this many "
+                      "window radii; finer finds narrower rival matches, at more stereo time (as `d2gs init "
+                      "--pm-filter-uniqueness-step`; docs/training.md)"},
+                     [](auto& c) -> auto& { return c.init_pm_uniqueness_step; }, closed(0.05, 4.0)));
+  t.back().absent_means = 1.0;  // runs recorded before the option existed sampled every window radius
   t.push_back(number({"random_points", init,
                       "Point count of --init random (random pixel rays of the training views, uniform inverse depth "
                       "within the scene's depth bounds: docs/training.md)"},

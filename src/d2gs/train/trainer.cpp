@@ -259,6 +259,7 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
     go.patch_match_fusion.max_color_difference = s.cfg.init_color_filter;
     go.patch_match.filter_min_distinctiveness = s.cfg.init_pm_distinctiveness;
     go.patch_match.filter_min_uniqueness = s.cfg.init_pm_uniqueness;
+    go.patch_match.filter_uniqueness_step = s.cfg.init_pm_uniqueness_step;
     return obtain_training_geometry(s.scene, s.split.train, go, geometry_dirs, s.out() / "init");
   };
   if (s.cfg.init == "dense" || s.cfg.init == "sparse") {
