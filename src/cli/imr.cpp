@@ -42,6 +42,7 @@ struct ImrCommandOptions {
   std::size_t samples = ImrOptions{}.mixture.samples;
   std::size_t strata_phase = ImrOptions{}.mixture.phase;
   double tolerance = ImrOptions{}.sinkhorn.tolerance;
+  double marginal_tolerance = ImrOptions{}.sinkhorn.marginal_tolerance;
   int max_iterations = ImrOptions{}.sinkhorn.max_iterations;
   bool exact_bures = false;
   bool debiased = false;
@@ -114,6 +115,8 @@ int run_imr(const ImrCommandOptions& o) {
   if (!(o.epsilon > 0.0) || !std::isfinite(o.epsilon)) fail("option --epsilon must be positive (got {})", o.epsilon);
   if (!(o.tolerance >= 0.0) || !std::isfinite(o.tolerance))
     fail("option --tolerance must be ≥ 0 (got {})", o.tolerance);
+  if (!(o.marginal_tolerance >= 0.0) || !std::isfinite(o.marginal_tolerance))
+    fail("option --marginal-tolerance must be ≥ 0 (got {})", o.marginal_tolerance);
   if (o.max_iterations < 1) fail("option --max-iterations must be ≥ 1 (got {})", o.max_iterations);
   if (o.reference_camera < 0) fail("option --reference-camera must be ≥ 0 (got {})", o.reference_camera);
   if (o.threads < 0) fail("option --threads must be ≥ 0 (got {})", o.threads);
@@ -132,6 +135,7 @@ int run_imr(const ImrCommandOptions& o) {
   options.cost.normalize = !o.no_normalize;
   options.sinkhorn.epsilon = o.epsilon;
   options.sinkhorn.tolerance = o.tolerance;
+  options.sinkhorn.marginal_tolerance = o.marginal_tolerance;
   options.sinkhorn.max_iterations = o.max_iterations;
   options.sinkhorn.epsilon_scaling = o.epsilon_scaling;
   options.sinkhorn.threads = o.threads;
@@ -241,8 +245,9 @@ int run_imr(const ImrCommandOptions& o) {
     if (!t.converged) {
       ++unconverged;
       spdlog::warn("imr: pair {}-{} did not converge: stopped at --max-iterations {} with a potential change of {:.3g} "
-                   "(tolerance {:.3g}); its S is approximate",
-                   p.a, p.b, t.iterations, t.last_change, o.tolerance);
+                   "(tolerance {:.3g}) and a marginal error of {:.3g}; its S is approximate{}",
+                   p.a, p.b, t.iterations, t.last_change, o.tolerance, t.marginal_error,
+                   o.marginal_tolerance > 0.0 ? "" : " (--marginal-tolerance stops on the plan's marginals instead)");
     }
   }
   for (std::size_t k = 0; k < result.self.size(); ++k)
@@ -264,7 +269,7 @@ int run_imr(const ImrCommandOptions& o) {
     out["models"] = models;
     out["reference_camera"] = reference_name;
     out["options"] = {{"epsilon", o.epsilon}, {"samples", o.samples}, {"strata_phase", o.strata_phase},
-                      {"tolerance", o.tolerance},
+                      {"tolerance", o.tolerance}, {"marginal_tolerance", o.marginal_tolerance},
                       {"max_iterations", o.max_iterations}, {"shape_cost", to_string(options.cost.shape)},
                       {"clamp_shape", options.cost.clamp_shape}, {"normalize", options.cost.normalize},
                       {"cost_storage", to_string(options.storage)}, {"epsilon_scaling", o.epsilon_scaling},
@@ -316,6 +321,10 @@ Run add_imr_command(CLI::App& app) {
       ->capture_default_str()
       ->check(not_negative());
   sub->add_option("--tolerance", o->tolerance, "Stop when the log-potentials change less than this")
+      ->capture_default_str();
+  sub->add_option("--marginal-tolerance", o->marginal_tolerance,
+                  "Also stop when the plan's L1 marginal error is below this (0 = off): ends solves whose low-mass "
+                  "components' potentials drift while the plan no longer changes (docs/imr.md)")
       ->capture_default_str();
   sub->add_option("--max-iterations", o->max_iterations, "Sinkhorn iteration limit")->capture_default_str();
   sub->add_flag("--exact-bures", o->exact_bures, "Exact Bures shape term instead of the release's Taylor form");

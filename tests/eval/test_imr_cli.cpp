@@ -121,6 +121,8 @@ TEST(ImrCli, OptionsAreCheckedBeforeTheModelsAreLoaded) {
            {"--epsilon 0", "--epsilon must be positive"},
            {"--epsilon -1", "--epsilon must be positive"},
            {"--tolerance -1", "--tolerance"},
+           {"--marginal-tolerance -1e-7", "--marginal-tolerance must be ≥ 0"},
+           {"--marginal-tolerance nan", "--marginal-tolerance must be ≥ 0"},
            {"--max-iterations 0", "--max-iterations"},
            {"--reference-camera -2", "--reference-camera"},
            {"--threads -1", "--threads"},

@@ -249,6 +249,52 @@ TEST(Sinkhorn, ReportsEveryIterationToTheCallback) {
   EXPECT_EQ(quiet.iterations, r.iterations);
 }
 
+// Two clusters far apart (cost 36, ε = 0.1): the big one holds 0.999 of each side, the small one 0.001 of the rows
+// and 0.001·(1 + 10⁻³) of the columns, so 10⁻⁶ of mass must cross. Plain Sinkhorn balances each cluster at once,
+// then the small cluster's potentials drift by log(1 + 10⁻³) ≈ 10⁻³ per iteration (above the tolerance) for the
+// ~3.6·10⁵ iterations the crossing needs, while the plan's marginals are already right to ~10⁻⁶.
+Problem drifting_problem() {
+  Problem p;
+  const std::size_t big = 24, small = 4;
+  p.n = p.m = big + small;
+  const auto x = [&](std::size_t k, double offset) {
+    return k < big ? offset + 0.05 * static_cast<double>(k) : 6.0 + offset + 0.05 * static_cast<double>(k - big);
+  };
+  const double small_rows = 1e-3, small_cols = 1e-3 * (1.0 + 1e-3);
+  for (std::size_t k = 0; k < p.n; ++k) {
+    p.a.push_back(k < big ? (1.0 - small_rows) / big : small_rows / small);
+    p.b.push_back(k < big ? (1.0 - small_cols) / big : small_cols / small);
+  }
+  for (std::size_t i = 0; i < p.n; ++i)
+    for (std::size_t j = 0; j < p.m; ++j) p.c.push_back(std::pow(x(i, 0.0) - x(j, 0.02), 2));
+  return p;
+}
+
+TEST(Sinkhorn, MarginalToleranceEndsADriftThatNoLongerMovesThePlan) {
+  const Problem p = drifting_problem();
+  for (const SinkhornMethod method : {SinkhornMethod::LogDomain, SinkhornMethod::StabilizedKernel}) {
+    SCOPED_TRACE(to_string(method));
+    SinkhornOptions o;
+    o.epsilon = 0.1;
+    o.method = method;
+    o.max_iterations = 2000;
+    const DenseCostMatrix<double> cost(p.n, p.m, p.c);
+    const SinkhornResult drift = sinkhorn(p.a, p.b, cost, o);
+    EXPECT_FALSE(drift.converged);  // the potentials' change never falls below 1e-4
+    EXPECT_GT(drift.last_change, 5e-4);
+    EXPECT_LT(drift.last_change, 2e-3);
+    o.marginal_tolerance = 1e-5;
+    const SinkhornResult stopped = sinkhorn(p.a, p.b, cost, o);
+    EXPECT_TRUE(stopped.converged);
+    EXPECT_LT(stopped.iterations, 100);
+    EXPECT_LT(stopped.marginal_error, 1e-5);
+    // The plan the 2 000 iterations reach moves no more mass across: the same transport cost.
+    EXPECT_NEAR(stopped.transport_cost, drift.transport_cost, 1e-6 * drift.transport_cost + 1e-7);
+    o.marginal_tolerance = -1.0;
+    EXPECT_THROW(sinkhorn(p.a, p.b, cost, o), Error);
+  }
+}
+
 TEST(Sinkhorn, RejectsBadInput) {
   const Problem p = random_problem(4, 5, 1);
   const DenseCostMatrix<double> cost(p.n, p.m, p.c);

@@ -732,6 +732,25 @@ void plan_row_precise(CostSpan span, const double* pot, double shift, double inv
 // the log-domain iteration written with scalings: the same map, the same fixed point, the same stopping rule.
 // What both solvers do on entering the stage at ε: the potentials rescaled so that f = εφ and g = εψ carry
 // over from the previous ε, the stage's record started, and its tolerance (the final one in the last stage).
+// The L1 marginal error of the plan (φ', ψ) whose rows φ' are the exact update from ψ: only its columns are off,
+// column j by the factor exp(ψ_j − ψ'_j) with ψ' the exact column update from φ'.
+double half_plan_marginal_error(std::span<const double> b, const std::vector<double>& psi,
+                                const std::vector<double>& psi_next) {
+  double error = 0.0;
+  for (std::size_t j = 0; j < psi.size(); ++j) error += b[j] * std::abs(std::expm1(psi[j] - psi_next[j]));
+  return error;
+}
+
+// Whether an iteration ends its stage: the potentials' change, or (when asked for, in the last stage) the plan's
+// marginal error. Intermediate stages keep the change rule: they set up the warm start of the next ε, and a stage
+// left with the potentials of low-mass components far off sends Anderson's extrapolation astray in the next.
+bool stage_reached(const SinkhornOptions& options, bool last_stage, double change, double tolerance,
+                   std::span<const double> b, const std::vector<double>& psi, const std::vector<double>& psi_next) {
+  if (change < tolerance) return true;
+  return last_stage && options.marginal_tolerance > 0.0 &&
+         half_plan_marginal_error(b, psi, psi_next) < options.marginal_tolerance;
+}
+
 struct StageEntry {
   bool last_stage;
   double inv_eps, tolerance;
@@ -878,7 +897,7 @@ SinkhornResult sinkhorn_kernel(std::span<const double> a, std::span<const double
       result.last_change = change;
       if (options.on_iteration) options.on_iteration(result.iterations, change, tolerance);
       bool done = false;
-      if (change < tolerance) {
+      if (stage_reached(options, last_stage, change, tolerance, b, psi, psi_next)) {
         if (accelerate && last_stage) {
           accelerate = false;  // the solve ends on plain iterations: the plain solver's stopping rule
           psi.swap(psi_next);
@@ -960,6 +979,8 @@ SinkhornResult sinkhorn(std::span<const double> a, std::span<const double> b, co
   if (n == 0 || m == 0) fail("sinkhorn: empty problem ({} x {})", n, m);
   if (!(options.epsilon > 0.0)) fail("sinkhorn: epsilon must be positive, got {}", options.epsilon);
   if (!(options.tolerance >= 0.0)) fail("sinkhorn: tolerance must be non-negative, got {}", options.tolerance);
+  if (!(options.marginal_tolerance >= 0.0) || !std::isfinite(options.marginal_tolerance))
+    fail("sinkhorn: marginal tolerance must be non-negative, got {}", options.marginal_tolerance);
   if (options.max_iterations < 1) fail("sinkhorn: max iterations must be at least 1, got {}", options.max_iterations);
   if (options.anderson_depth < 0) fail("sinkhorn: Anderson depth must be ≥ 0, got {}", options.anderson_depth);
   std::vector<double> log_a(n), log_b(m);
@@ -1037,7 +1058,7 @@ SinkhornResult sinkhorn(std::span<const double> a, std::span<const double> b, co
       if (!std::isfinite(change)) fail("sinkhorn: the potentials diverged (non-finite values) at iteration {}", result.iterations);
       result.last_change = change;
       if (options.on_iteration) options.on_iteration(result.iterations, change, tolerance);
-      if (change < tolerance) {
+      if (stage_reached(options, last_stage, change, tolerance, b, psi, psi_next)) {
         if (accelerate && last_stage) {
           // The solve ends on plain iterations: the plain solver's stopping rule.
           accelerate = false;
