@@ -725,13 +725,6 @@ void plan_row_precise(CostSpan span, const double* pot, double shift, double inv
   *cost = scale * sc;
 }
 
-// The stabilised-kernel solver (SinkhornMethod::StabilizedKernel; see the header). State: the absolute
-// log-potentials φ (after the row update) and ψ, the kernel's potentials φ̂ (per row) and ψ̂ (per column), and
-// v = exp(ψ − ψ̂). Each iteration, in one pass over K by chunks of rows: s_i = (K v)_i, u_i = a_i / s_i,
-// φ_i = φ̂_i + log u_i, y += u_i K_i (the chunk's accumulator); then v_j = b_j / y_j, ψ_j = ψ̂_j + log v_j. It is
-// the log-domain iteration written with scalings: the same map, the same fixed point, the same stopping rule.
-// What both solvers do on entering the stage at ε: the potentials rescaled so that f = εφ and g = εψ carry
-// over from the previous ε, the stage's record started, and its tolerance (the final one in the last stage).
 // The L1 marginal error of the plan (φ', ψ) whose rows φ' are the exact update from ψ: only its columns are off,
 // column j by the factor exp(ψ_j − ψ'_j) with ψ' the exact column update from φ'.
 double half_plan_marginal_error(std::span<const double> b, const std::vector<double>& psi,
@@ -751,6 +744,13 @@ bool stage_reached(const SinkhornOptions& options, bool last_stage, double chang
          half_plan_marginal_error(b, psi, psi_next) < options.marginal_tolerance;
 }
 
+// The stabilised-kernel solver (SinkhornMethod::StabilizedKernel; see the header). State: the absolute
+// log-potentials φ (after the row update) and ψ, the kernel's potentials φ̂ (per row) and ψ̂ (per column), and
+// v = exp(ψ − ψ̂). Each iteration, in one pass over K by chunks of rows: s_i = (K v)_i, u_i = a_i / s_i,
+// φ_i = φ̂_i + log u_i, y += u_i K_i (the chunk's accumulator); then v_j = b_j / y_j, ψ_j = ψ̂_j + log v_j. It is
+// the log-domain iteration written with scalings: the same map, the same fixed point, the same stopping rule.
+// What both solvers do on entering the stage at ε: the potentials rescaled so that f = εφ and g = εψ carry
+// over from the previous ε, the stage's record started, and its tolerance (the final one in the last stage).
 struct StageEntry {
   bool last_stage;
   double inv_eps, tolerance;
