@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include "d2gs/core/atomic_file.hpp"
+#include "d2gs/eval/sinkhorn.hpp"
 #include "d2gs/experiment/runner.hpp"
 #include "d2gs/train/checkpoint.hpp"
 #include "report/chromium.hpp"
@@ -124,6 +125,15 @@ TEST(ExperimentRuns, TwoMethodsTwoSeedsInParallelThenSkipped) {
   EXPECT_NE(again.find("0 trained, 4 skipped, 0 failed"), std::string::npos) << again;
   EXPECT_EQ(again.find("IMR of"), std::string::npos) << again;
   EXPECT_EQ(fs::last_write_time(dir / "exp/runs/fern/3v/3dgs/seed0/results.json"), before);
+  // A cache written by another revision of the solver's iterations is recomputed.
+  EXPECT_EQ(imr["solver"]["revision"].get<int>(), kSinkhornRevision);
+  auto stale = imr;
+  stale["solver"]["revision"] = kSinkhornRevision - 1;
+  write_file_atomic(dir / "exp/imr/fern__3v__3dgs.json", stale.dump(2) + "\n");
+  const std::string third = experiment(config, dir / "exp", "--jobs 2", &code);
+  ASSERT_EQ(code, 0) << third;
+  EXPECT_EQ(count_occurrences(third, "IMR of"), 1u) << third;  // that group only
+  EXPECT_EQ(nlohmann::json::parse(read_file(dir / "exp/imr/fern__3v__3dgs.json"))["imr"], imr["imr"]);
   // collect alone, from the folder's experiment.json.
   const auto c = test::run_cli("experiment collect -o '" + (dir / "exp").string() + "' --no-imr");
   ASSERT_EQ(c.exit_code, 0) << c.output;

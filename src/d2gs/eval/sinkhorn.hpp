@@ -78,6 +78,10 @@ DenseCostMatrix<T> store_cost(const CostMatrix& cost, bool with_columns = true);
 //   Kernel entries below e^−87 are 0 (no subnormals): with scalings within e^±τ the omitted plan entries are
 //   below e^(2τ−87). Reads the cost by rows only.
 enum class SinkhornMethod { LogDomain, StabilizedKernel };
+
+// Revision of the iterations: raised when the same options give other iterates (2: the accelerated solver's dual
+// safeguard, 2026-12-01). Results cached under the options (the experiment runner's IMR) also key on it.
+inline constexpr int kSinkhornRevision = 2;
 const char* to_string(SinkhornMethod method);
 
 struct SinkhornOptions {
@@ -108,8 +112,10 @@ struct SinkhornOptions {
   // change and the tolerance of the current stage: progress for long solves. Not called when empty.
   std::function<void(int iteration, double change, double tolerance)> on_iteration = nullptr;
   // Anderson acceleration (Walker & Ni 2011) of the map ψ ↦ (one plain iteration from ψ), with this many past
-  // iterates (0: off, plain Sinkhorn). Same fixed point; restarted at each ε stage, and plain for the rest of a
-  // stage after 5 safeguard restarts in it (sinkhorn.cpp, class Anderson). In the last stage, once an
+  // iterates (0: off, plain Sinkhorn). Same fixed point; restarted at each ε stage and by two safeguards (an
+  // extrapolation that lowers the dual objective is replaced by the plain step; one that doubles the residual
+  // returns to the best iterate), and plain for the rest of a stage after `anderson_max_restarts` restarts in it
+  // (sinkhorn.cpp, class Anderson). In the last stage, once an
   // iteration changes the potentials by less than `tolerance`, the solve goes on with plain iterations until one
   // of them does too: the stopping rule of the plain solver.
   int anderson_depth = 0;

@@ -57,7 +57,8 @@ void group_imr(GroupRow& row, const std::vector<const RunSpec*>& members, const 
                                  {"stage_tolerance", o.sinkhorn.stage_tolerance},
                                  {"anderson_depth", o.sinkhorn.anderson_depth},
                                  {"anderson_max_restarts", o.sinkhorn.anderson_max_restarts},
-                                 {"solver", to_string(o.sinkhorn.method)}};
+                                 {"solver", to_string(o.sinkhorn.method)},
+                                 {"revision", kSinkhornRevision}};
   const auto note_unconverged = [&row](const nlohmann::json& pairs) {
     int unconverged = 0;
     for (const auto& p : pairs) unconverged += p.at("converged").get<bool>() ? 0 : 1;
