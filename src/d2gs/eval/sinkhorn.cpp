@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <deque>
 #include <limits>
 #include <type_traits>
 
@@ -569,29 +570,42 @@ double max_cost_entry(const CostMatrix& cost, int threads) {
 //   γ = argmin ‖F_k − ΔF γ‖₂,   ψ_{k+1} = G(ψ_k) − ΔG γ
 // (ΔF, ΔG: differences of successive residuals and images). The small least-squares problem is solved by its
 // normal equations with a relative Tikhonov term; all sums run serially in a fixed order (deterministic). The
-// history restarts when the largest entry of the residual exceeds twice the smallest one in this stage (the
-// extrapolation has left the region where the map is nearly linear: the next iterate is then the plain step from
-// the best iterate, G(ψ_best), whose residual becomes the new reference), and when the Gram matrix is not
-// positive definite in floating point (the plain step ψ_{k+1} = G(ψ_k)).
+// history restarts when the residual's b-weighted L1 norm Σ_j b_j |F_j| exceeds twice the smallest one since the
+// last restart (the extrapolation has left the region where the map is nearly linear: the next iterate is then the
+// plain step from the best iterate, G(ψ_best), whose residual becomes the new reference), and when the Gram matrix
+// is not positive definite in floating point (the plain step ψ_{k+1} = G(ψ_k)). To first order that norm is the L1
+// column-marginal error of the plan after the row update (1 − exp(−F_j) ≈ F_j), the mass still misplaced. The
+// largest entry of F, which the stopping rule looks at, is the wrong measure here: a group of components with almost
+// no mass can move its potentials by a lot while the plan hardly changes, and a safeguard on the largest entry then
+// restarts again and again over a detour that costs nothing (docs/benchmarks.md, "IMR: a dual safeguard for the
+// accelerated solver").
 //
-// A second safeguard keeps the dual objective rising. With φ(ψ) the exact row update from ψ, the entropic dual
-// at (φ(ψ), ψ) is ε (⟨a, φ(ψ)⟩ + ⟨b, ψ⟩ − 1) (the plan's rows then sum to a), and a plain iteration never lowers
-// it (each half is an exact block maximisation). The solver evaluates h(ψ) = ⟨a, φ(ψ)⟩ + ⟨b, ψ⟩ with every row
-// update; when an extrapolated iterate has a lower h than the iterate it was extrapolated from, the history
-// restarts and the next iterate is the plain step from that previous iterate, whose h is at least as high. So h
-// never falls from one accepted iterate to the next, and an extrapolation that keeps going astray costs one
-// iteration and leaves the plain step in its place, instead of a return to the best iterate by the residual, which
-// can go back to the same point again and again (a trained horns pair: 2 950 such restarts in 10 000 iterations
-// and no convergence, where plain iterations converge in 4 275; docs/imr.md).
+// A second safeguard keeps the dual objective from falling for long. With φ(ψ) the exact row update from ψ, the
+// entropic dual at (φ(ψ), ψ) is ε (⟨a, φ(ψ)⟩ + ⟨b, ψ⟩ − 1) (the plan's rows then sum to a), and a plain iteration
+// never lowers it (each half is an exact block maximisation). The solver evaluates h(ψ) = ⟨a, φ(ψ)⟩ + ⟨b, ψ⟩ with
+// every row update. An extrapolated iterate may lower h (Anderson's path is not monotone, and the detours pay), but
+// not below the lowest h of the last `depth` accepted iterates (the non-monotone acceptance rule of Grippo,
+// Lampariello & Lucidi 1986; DAAREM, Henderson & Varadhan 2019, likewise lets Anderson-accelerated EM lose a bounded
+// amount of its objective): when it does, the history restarts and the next iterate is the plain step from the previous iterate, whose h is at
+// least that iterate's. So the lowest h over the window never falls, and an extrapolation that keeps going astray
+// costs one iteration and leaves the plain step in its place, instead of a return to the best iterate by the
+// residual, which can go back to the same point again and again (a trained horns pair: 2 950 such restarts in
+// 10 000 iterations and no convergence, where plain iterations converge in 4 275; docs/imr.md). Measured against
+// the previous iterate alone (a monotone rule) the safeguard rejects the small falls of h that lead out of a slow
+// drift, and another horns pair then stalls (docs/benchmarks.md, "IMR: a dual safeguard for the accelerated
+// solver").
 //
 // After `max_restarts` restarts in a stage (both safeguards count) the solver iterates plain for the rest of it.
 class Anderson {
 public:
-  Anderson(std::size_t depth, std::size_t size) : depth_(depth), size_(size) {}
+  // weights: the column marginal b (the residual safeguard's weights), one per potential ψ_k.
+  Anderson(std::size_t depth, std::span<const double> weights)
+      : depth_(depth), size_(weights.size()), weights_(weights) {}
   // A new stage (potentials rescaled, another ε: the dual values of the last stage do not compare).
   void reset() {
     restart_history();
     extrapolated_ = false;
+    window_.clear();
   }
   int restarts() const { return restarts_; }
   // x: the current iterate ψ_k, replaced by ψ_{k+1}; g = G(ψ_k); dual = h(ψ_k), dual_scale = ⟨a, |φ|⟩ + ⟨b, |ψ|⟩
@@ -607,16 +621,18 @@ public:
       x = g;
       return;
     }
-    // Dual safeguard: the extrapolation lowered h below the previous iterate's: the plain step from that iterate.
+    // Dual safeguard: the extrapolation lowered h below the lowest of the window: the plain step from the previous
+    // iterate (the window's last entry).
     const double slack = kDualNoise + 64.0 * std::numeric_limits<double>::epsilon() * dual_scale;
-    if (extrapolated_ && dual < previous_dual_ - slack) {
+    if (extrapolated_ && dual < *std::min_element(window_.begin(), window_.end()) - slack) {
       restart_history();
       ++restarts_;
       extrapolated_ = false;
-      x = previous_g_;  // G(ψ_{k−1}): h at least previous_dual_, which stays the reference
+      x = previous_g_;  // G(ψ_{k−1}): h at least that of ψ_{k−1}, which is in the window
       return;
     }
-    previous_dual_ = dual;
+    if (window_.size() == depth_) window_.pop_front();
+    window_.push_back(dual);
     extrapolated_ = false;
     if (dg_.empty()) {
       dg_.assign(depth_, std::vector<double>(size_));
@@ -625,21 +641,21 @@ public:
       previous_f_.resize(size_);
       f_.resize(size_);
     }
-    double largest = 0.0;
+    double residual = 0.0;  // Σ b_k |F_k|, serial
     for (std::size_t k = 0; k < size_; ++k) {
       f_[k] = g[k] - x[k];
-      largest = std::max(largest, std::abs(f_[k]));
+      residual += weights_[k] * std::abs(f_[k]);
     }
-    // Safeguard: the largest residual entry (what the stopping rule looks at) has doubled over the best in this
-    // stage: the extrapolation has gone astray. Restart the history from the plain step of the best iterate.
-    if (largest > 2.0 * best_) {
+    // Residual safeguard: the misplaced mass has doubled over the best since the last restart: the extrapolation
+    // has gone astray. Restart the history from the plain step of the best iterate.
+    if (residual > 2.0 * best_) {
       restart_history();
       ++restarts_;
       x = best_g_;
       return;
     }
-    if (largest < best_) {
-      best_ = largest;
+    if (residual < best_) {
+      best_ = residual;
       best_g_ = g;
     }
     if (has_previous_) {
@@ -717,9 +733,11 @@ private:
   }
 
   std::size_t depth_, size_, count_ = 0, head_ = 0;
+  std::span<const double> weights_;
   int restarts_ = 0;
   bool has_previous_ = false, extrapolated_ = false;  // extrapolated_: the current iterate is an extrapolation
-  double best_ = std::numeric_limits<double>::infinity(), previous_dual_ = 0.0;
+  double best_ = std::numeric_limits<double>::infinity();
+  std::deque<double> window_;  // h of the last `depth_` accepted iterates in this stage, oldest first
   std::vector<std::vector<double>> dg_, df_;
   std::vector<double> previous_g_, previous_f_, f_, best_g_;
 };
@@ -842,7 +860,7 @@ SinkhornResult sinkhorn_kernel(std::span<const double> a, std::span<const double
   std::vector<double> dphi(n, 0.0), dpsi(m, 0.0), psi_next(m, 0.0), u(n, 1.0);
   std::vector<unsigned char> refreshed(n, 0), bad_column(m, 0);
   Scratch scratch(threads, std::max(n, m));
-  Anderson anderson(static_cast<std::size_t>(std::max(0, options.anderson_depth)), m);
+  Anderson anderson(static_cast<std::size_t>(std::max(0, options.anderson_depth)), b);
   SinkhornResult result;
   const auto sm = static_cast<std::int64_t>(m), sn = static_cast<std::int64_t>(n);
 
@@ -1068,7 +1086,7 @@ SinkhornResult sinkhorn(std::span<const double> a, std::span<const double> b, co
   SinkhornResult result;
   std::vector<double> phi(n, 0.0), psi(m, 0.0), dphi(n, 0.0), dpsi(m, 0.0), psi_next(m, 0.0);
   Scratch scratch(threads, std::max(n, m));
-  Anderson anderson(static_cast<std::size_t>(std::max(0, options.anderson_depth)), m);
+  Anderson anderson(static_cast<std::size_t>(std::max(0, options.anderson_depth)), b);
   double eps_prev = epsilons.front();
   for (const double eps : epsilons) {
     const auto stage_start = std::chrono::steady_clock::now();
