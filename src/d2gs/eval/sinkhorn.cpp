@@ -586,8 +586,8 @@ double max_cost_entry(const CostMatrix& cost, int threads) {
 // every row update. An extrapolated iterate may lower h (Anderson's path is not monotone, and the detours pay), but
 // not below the lowest h of the last `depth` accepted iterates (the non-monotone acceptance rule of Grippo,
 // Lampariello & Lucidi 1986; DAAREM, Henderson & Varadhan 2019, likewise lets Anderson-accelerated EM lose a bounded
-// amount of its objective): when it does, the history restarts and the next iterate is the plain step from the previous iterate, whose h is at
-// least that iterate's. So the lowest h over the window never falls, and an extrapolation that keeps going astray
+// amount of its objective): when it does, the history restarts and the next iterate is the plain step from the
+// previous iterate, whose h is at least that iterate's. So the lowest h over the window never falls, and an extrapolation that keeps going astray
 // costs one iteration and leaves the plain step in its place, instead of a return to the best iterate by the
 // residual, which can go back to the same point again and again (a trained horns pair: 2 950 such restarts in
 // 10 000 iterations and no convergence, where plain iterations converge in 4 275; docs/imr.md). Measured against

@@ -80,8 +80,9 @@ DenseCostMatrix<T> store_cost(const CostMatrix& cost, bool with_columns = true);
 enum class SinkhornMethod { LogDomain, StabilizedKernel };
 
 // Revision of the iterations: raised when the same options give other iterates (2: the accelerated solver's dual
-// safeguard against the previous iterate; 3: against the lowest of the last `anderson_depth` iterates, both
-// 2026-12-01). Results cached under the options (the experiment runner's IMR) also key on it.
+// safeguard against the previous iterate; 3: against the lowest of the last `anderson_depth` iterates, and the
+// residual safeguard on Σ b_j |F_j|; both 2026-12-01). Results cached under the options (the experiment runner's
+// IMR) also key on it.
 inline constexpr int kSinkhornRevision = 3;
 const char* to_string(SinkhornMethod method);
 
@@ -115,11 +116,10 @@ struct SinkhornOptions {
   // Anderson acceleration (Walker & Ni 2011) of the map ψ ↦ (one plain iteration from ψ), with this many past
   // iterates (0: off, plain Sinkhorn). Same fixed point; restarted at each ε stage and by two safeguards (an
   // extrapolation that lowers the dual objective below its lowest over the last `anderson_depth` iterates is
-  // replaced by the plain step; one that doubles the b-weighted residual
-  // returns to the best iterate), and plain for the rest of a stage after `anderson_max_restarts` restarts in it
-  // (sinkhorn.cpp, class Anderson). In the last stage, once an
-  // iteration changes the potentials by less than `tolerance`, the solve goes on with plain iterations until one
-  // of them does too: the stopping rule of the plain solver.
+  // replaced by the plain step; one that doubles the b-weighted residual returns to the best iterate), and plain
+  // for the rest of a stage after `anderson_max_restarts` restarts in it (sinkhorn.cpp, class Anderson). In the
+  // last stage, once an iteration changes the potentials by less than `tolerance`, the solve goes on with plain
+  // iterations until one of them does too: the stopping rule of the plain solver.
   int anderson_depth = 0;
   // Safeguard restarts after which a stage goes on with plain iterations (< 0: no limit).
   int anderson_max_restarts = 5;
