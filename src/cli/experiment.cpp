@@ -47,6 +47,12 @@ int run_experiment_command(const ExperimentOptions& o) {
   experiment::ExperimentConfig config;
   std::vector<experiment::RunSpec> runs;
   if (!o.config.empty()) {
+    // The folder's experiment.json is the runner's own state, rewritten below: an experiment file kept
+    // there would be replaced by the state (and then no longer load as an experiment file).
+    std::error_code ec;
+    if (fs::exists(out / "experiment.json") && fs::equivalent(o.config, out / "experiment.json", ec))
+      fail_file(o.config, "is where the folder -o keeps the experiment's state, which the runner rewrites; keep the "
+                          "experiment file outside that folder, or give -o alone to use the stored experiment");
     config = experiment::load_experiment_config(o.config, o.data_root);
     runs = experiment::expand_runs(config, out);
     if (o.run_index < 0 || !fs::exists(out / "experiment.json")) experiment::write_experiment_state(out, config, runs);

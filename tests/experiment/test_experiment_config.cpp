@@ -249,5 +249,39 @@ TEST(ExperimentCli, OutputUnderAFileIsRefusedFirst) {
   EXPECT_EQ(r.output.find("internal"), std::string::npos) << r.output;
 }
 
+// `--config DIR/experiment.json -o DIR` used to replace the user's experiment file by the runner's state
+// (silently), after which the same command failed on an "unknown key 'config'".
+TEST(ExperimentCli, AnExperimentFileInsideItsOwnFolderIsNotOverwritten) {
+  const auto dir = test::scratch_dir() / "inside";
+  fs::create_directories(dir);
+  const auto shipped = test::source_dir() / "configs/experiments/llff_fern_3views.json";
+  const std::string text = read_file(shipped);
+  write_file_atomic(dir / "experiment.json", text);
+  const auto r = test::run_cli("experiment --config '" + (dir / "experiment.json").string() + "' --data-root '" +
+                               test::shared_data().string() + "' -o '" + dir.string() + "' --list");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find((dir / "experiment.json").string() + ": is where the folder -o keeps the experiment's state"),
+            std::string::npos)
+      << r.output;
+  EXPECT_EQ(read_file(dir / "experiment.json"), text);
+}
+
+TEST(ExperimentCli, AFoldersStateGivenAsTheExperimentFileSaysWhatItIs) {
+  const auto dir = test::scratch_dir();
+  const auto shipped = test::source_dir() / "configs/experiments/llff_fern_3views.json";
+  const auto first = test::run_cli("experiment --config '" + shipped.string() + "' --data-root '" +
+                                   test::shared_data().string() + "' -o '" + (dir / "a").string() + "' --list");
+  ASSERT_EQ(first.exit_code, 0) << first.output;
+  const auto state = dir / "a" / "experiment.json";
+  const auto r = test::run_cli("experiment --config '" + state.string() + "' -o '" + (dir / "b").string() + "' --list");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find(state.string() + ": is an experiment folder's state"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find(fs::absolute(shipped).string()), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(dir / "b" / "experiment.json"));
+  // The folder itself still runs from its state.
+  const auto again = test::run_cli("experiment -o '" + (dir / "a").string() + "' --list");
+  EXPECT_EQ(again.exit_code, 0) << again.output;
+}
+
 }  // namespace
 }  // namespace d2gs::experiment

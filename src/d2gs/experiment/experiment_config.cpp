@@ -96,7 +96,13 @@ std::vector<T> number_list(const nlohmann::json& j, const char* key, T min, T ma
 std::string RunSpec::id() const { return fmt::format("{}__{}v__{}__seed{}", scene, views, label, seed); }
 
 ExperimentConfig load_experiment_config(const fs::path& file, const std::string& data_root_override) {
-  return parse_experiment_config(read_json_file(file), file, data_root_override);
+  const nlohmann::json j = read_json_file(file);
+  if (j.is_object() && j.contains("format") && j.contains("config"))
+    fail_file(file, "is an experiment folder's state (written by d2gs experiment), not an experiment file: give its "
+                    "folder with -o and no --config, or the experiment file it was made from ({})",
+              j.contains("config_file") && j["config_file"].is_string() ? j["config_file"].get<std::string>()
+                                                                         : std::string("unrecorded"));
+  return parse_experiment_config(j, file, data_root_override);
 }
 
 ExperimentConfig parse_experiment_config(const nlohmann::json& j, const fs::path& file,
