@@ -55,11 +55,19 @@ int run_experiment_command(const ExperimentOptions& o) {
                           "experiment file outside that folder, or give -o alone to use the stored experiment");
     config = experiment::load_experiment_config(o.config, o.data_root);
     runs = experiment::expand_runs(config, out);
-    if (o.run_index < 0 || !fs::exists(out / "experiment.json")) experiment::write_experiment_state(out, config, runs);
   } else {
     if (!o.data_root.empty()) fail("option --data-root needs --config");
     std::tie(config, runs) = experiment::read_experiment_state(out);
   }
+  // A finished run trained otherwise than the experiment now says is refused before anything is written,
+  // trained or tabulated (--list shows it in the run's status instead).
+  if (!o.list) {
+    const bool one = o.run_index >= 0 && o.run_index < static_cast<int>(runs.size());
+    experiment::check_finished_runs_match(
+        out, one ? std::vector<experiment::RunSpec>{runs[static_cast<std::size_t>(o.run_index)]} : runs);
+  }
+  if (!o.config.empty() && (o.run_index < 0 || !fs::exists(out / "experiment.json")))
+    experiment::write_experiment_state(out, config, runs);
 
   experiment::CollectOptions co;
   co.imr = !o.no_imr;

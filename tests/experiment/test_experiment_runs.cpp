@@ -138,6 +138,38 @@ TEST(ExperimentRuns, TwoMethodsTwoSeedsInParallelThenSkipped) {
   const auto c = test::run_cli("experiment collect -o '" + (dir / "exp").string() + "' --no-imr");
   ASSERT_EQ(c.exit_code, 0) << c.output;
   EXPECT_NE(c.output.find("4 of 4 runs finished"), std::string::npos) << c.output;
+
+  // An output-only change (how often the log is written) leaves the finished runs the experiment's.
+  nlohmann::json edited = nlohmann::json::parse(read_file(config));
+  edited["train"]["log_every"] = 2;
+  write_file_atomic(config, edited.dump(2));
+  const std::string fourth = experiment(config, dir / "exp", "--no-imr", &code);
+  ASSERT_EQ(code, 0) << fourth;
+  EXPECT_NE(fourth.find("0 trained, 4 skipped, 0 failed"), std::string::npos) << fourth;
+  // A method's options changed under the same name: its finished runs are no longer what the experiment
+  // configures, so they are refused, not counted as the new configuration's (and nothing is trained or
+  // tabulated, the folder's state is left as it was).
+  const std::string state = read_file(dir / "exp/experiment.json");
+  const std::string table = read_file(dir / "exp/tables/results.md");
+  edited["methods"][1]["options"] = {{"opacity_lr", 0.1}};
+  write_file_atomic(config, edited.dump(2));
+  for (const char* extra : {"--no-imr", "--collect --no-imr", "--emit-slurm"}) {
+    const std::string changed = experiment(config, dir / "exp", extra, &code);
+    EXPECT_EQ(code, 1) << extra << changed;
+    EXPECT_NE(changed.find("dropgaussian/seed0: run "), std::string::npos) << extra << changed;
+    EXPECT_NE(changed.find("finished with another configuration than the experiment now gives it (opacity_lr was "
+                           "0.05, the experiment now gives 0.1)"),
+              std::string::npos)
+        << extra << changed;
+    EXPECT_EQ(count_occurrences(changed, "\n"), 1u) << extra << changed;
+  }
+  EXPECT_EQ(read_file(dir / "exp/experiment.json"), state);
+  EXPECT_EQ(read_file(dir / "exp/tables/results.md"), table);
+  EXPECT_FALSE(fs::exists(dir / "exp/slurm"));
+  const std::string listed = experiment(config, dir / "exp", "--list", &code);
+  EXPECT_EQ(code, 0) << listed;
+  EXPECT_EQ(count_occurrences(listed, "finished with another configuration: opacity_lr was 0.05"), 2u) << listed;
+  EXPECT_EQ(count_occurrences(listed, "finished: PSNR"), 2u) << listed;  // 3dgs's runs are unchanged
 }
 
 TEST(ExperimentRuns, InterruptedRunResumesFromItsCheckpointBitIdentically) {

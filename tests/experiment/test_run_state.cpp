@@ -9,7 +9,9 @@
 
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/file_lock.hpp"
+#include "d2gs/core/error.hpp"
 #include "d2gs/experiment/run_state.hpp"
+#include "d2gs/train/config.hpp"
 #include "test_paths.hpp"
 
 namespace d2gs::experiment {
@@ -97,6 +99,12 @@ TEST(RunState, RunningWhileALiveProcessHoldsTheLock) {
 
 TEST(RunState, FinishedRunGivesItsScoresOrWhyNot) {
   const Folder f;
+  // The run's config.json as d2gs train writes it: every option.
+  TrainConfig trained;
+  update_from_json(trained, f.run.train_config);
+  nlohmann::json recorded;
+  to_json(recorded, trained);
+  write_file_atomic(f.dir() / "config.json", recorded.dump());
   write_file_atomic(f.dir() / "results.json",
                     nlohmann::json{{"mean", {{"PSNR", 23.2071}, {"SSIM", 0.76237}, {"LPIPS", nullptr}}},
                                    {"gaussians", 69531},
@@ -109,6 +117,28 @@ TEST(RunState, FinishedRunGivesItsScoresOrWhyNot) {
   s = inspect_run(f.out, f.run);
   EXPECT_EQ(s.phase, RunPhase::Finished);
   EXPECT_EQ(describe(s), "finished (results.json has no mean PSNR and SSIM)");
+}
+
+TEST(RunState, FinishedRunTrainedOtherwiseSaysHow) {
+  const Folder f;
+  write_file_atomic(f.dir() / "results.json",
+                    nlohmann::json{{"mean", {{"PSNR", 23.2071}, {"SSIM", 0.76237}}}, {"gaussians", 1}}.dump());
+  TrainConfig trained;
+  update_from_json(trained, f.run.train_config);
+  nlohmann::json recorded;
+  to_json(recorded, trained);
+  recorded["opacity_lr"] = 0.1;
+  recorded["log_every"] = 1;  // output-only: not a difference
+  write_file_atomic(f.dir() / "config.json", recorded.dump());
+  EXPECT_EQ(describe(inspect_run(f.out, f.run)),
+            "finished with another configuration: opacity_lr was 0.1, the experiment now gives 0.05");
+  EXPECT_THROW(check_finished_runs_match(f.out, {f.run}), Error);
+  recorded["opacity_lr"] = 0.05;
+  write_file_atomic(f.dir() / "config.json", recorded.dump());
+  EXPECT_EQ(describe(inspect_run(f.out, f.run)), "finished: PSNR 23.207, SSIM 0.7624, 1 Gaussians, 0 s");
+  EXPECT_NO_THROW(check_finished_runs_match(f.out, {f.run}));
+  fs::remove(f.dir() / "config.json");  // a finished run that cannot be checked is not taken as matching
+  EXPECT_NE(describe(inspect_run(f.out, f.run)).find("its config.json cannot be compared"), std::string::npos);
 }
 
 }  // namespace

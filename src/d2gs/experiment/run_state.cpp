@@ -6,9 +6,13 @@
 #include <nlohmann/json.hpp>
 
 #include "d2gs/core/atomic_file.hpp"
+#include "d2gs/core/error.hpp"
 #include "d2gs/core/file_lock.hpp"
+#include "d2gs/core/json_value.hpp"
 #include "d2gs/report/run_data.hpp"
 #include "d2gs/train/checkpoint.hpp"
+#include "d2gs/train/config.hpp"
+#include "d2gs/train/options.hpp"
 #include "d2gs/train/progress.hpp"
 
 namespace d2gs::experiment {
@@ -73,6 +77,42 @@ const char* to_string(RunPhase p) {
   return "?";
 }
 
+std::string finished_run_differs(const fs::path& out_dir, const RunSpec& run) {
+  const fs::path recorded_file = out_dir / run.dir / "config.json";
+  nlohmann::json was, now;
+  try {
+    TrainConfig recorded, expected;
+    take_recorded_run_config(recorded, read_json_file(recorded_file));
+    update_from_json(expected, run.train_config);
+    was = identity_options(recorded, true);
+    now = identity_options(expected, true);
+  } catch (const std::exception& e) {
+    return fmt::format("its config.json cannot be compared ({})", e.what());
+  }
+  // Options held in single precision read back as doubles like 0.05000000074505806: shown as floats.
+  const auto show = [](const nlohmann::json& v) {
+    return v.is_number_float() ? fmt::format("{:.7g}", v.get<double>()) : v.dump();
+  };
+  for (const TrainOption& o : train_options()) {
+    if (!now.contains(o.name)) continue;
+    const nlohmann::json then = was.value(o.name, nlohmann::json());
+    if (then != now.at(o.name))
+      return fmt::format("{} was {}, the experiment now gives {}", o.name, show(then), show(now.at(o.name)));
+  }
+  return {};
+}
+
+void check_finished_runs_match(const fs::path& out_dir, const std::vector<RunSpec>& runs) {
+  for (const RunSpec& run : runs) {
+    std::error_code ec;
+    if (!fs::is_regular_file(out_dir / run.dir / "results.json", ec)) continue;
+    if (const std::string why = finished_run_differs(out_dir, run); !why.empty())
+      fail_file(out_dir / run.dir, "run {} finished with another configuration than the experiment now gives it ({}); "
+                                   "move the folder away to train it again, or give the changed method another variant",
+                run.index, why);
+  }
+}
+
 RunState inspect_run(const fs::path& out_dir, const RunSpec& run, long ended_holder) {
   RunState s;
   const fs::path dir = out_dir / run.dir;
@@ -84,6 +124,7 @@ RunState inspect_run(const fs::path& out_dir, const RunSpec& run, long ended_hol
   if (fs::is_regular_file(dir / "results.json", ec)) {
     s.phase = RunPhase::Finished;
     read_results(dir / "results.json", s);
+    s.differs = finished_run_differs(out_dir, run);
     return s;
   }
   if (!fs::exists(log, ec)) return s;  // pending
@@ -116,6 +157,7 @@ std::string describe(const RunState& s) {
   switch (s.phase) {
     case RunPhase::Pending: return "pending";
     case RunPhase::Finished:
+      if (!s.differs.empty()) return "finished with another configuration: " + s.differs;
       if (!s.message.empty()) return "finished (" + s.message + ")";
       return fmt::format("finished: PSNR {:.3f}, SSIM {:.4f}, {} Gaussians, {:.0f} s", s.psnr, s.ssim, s.gaussians,
                          s.train_seconds);

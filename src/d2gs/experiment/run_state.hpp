@@ -11,6 +11,7 @@
 // is not told apart.
 #include <filesystem>
 #include <string>
+#include <vector>
 
 #include "d2gs/experiment/experiment_config.hpp"
 
@@ -29,11 +30,23 @@ struct RunState {
   double psnr = 0, ssim = 0, train_seconds = 0;  // finished: results.json's mean test scores and time
   long gaussians = 0;                           // finished: the model's size
   std::string message;  // failed: the log's error line; finished: why results.json could not be read
+  std::string differs;  // finished: how it was trained otherwise than the experiment now says (empty: it was not)
 };
 
 // `ended_holder`: a process id known to hold no run any more, not taken as running (the runner's own, when
 // its report inspects the runs after they ended; 0: none).
 RunState inspect_run(const std::filesystem::path& out_dir, const RunSpec& run, long ended_holder = 0);
+
+// Empty when the finished run in `out_dir / run.dir` was trained as the experiment now configures it (every
+// option but the output-only ones, paths absolute: train/checkpoint.hpp's identity_options); else the first
+// difference, e.g. "opacity_lr was 0.05, the experiment now gives 0.1". A run whose config.json cannot be read
+// says so. Changing a method's options under the same variant name would otherwise count the old results as
+// the new configuration's.
+std::string finished_run_differs(const std::filesystem::path& out_dir, const RunSpec& run);
+
+// Fails with a one-line error naming the first finished run of `runs` that finished_run_differs, before
+// anything is trained or tabulated.
+void check_finished_runs_match(const std::filesystem::path& out_dir, const std::vector<RunSpec>& runs);
 
 // One line, e.g. "finished: PSNR 23.207, SSIM 0.7624, 69531 Gaussians, 2532 s" or "running (pid 812):
 // iteration 5000/10000 after 22:02, about 22:02 left at the mean pace so far".

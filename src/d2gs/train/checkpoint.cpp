@@ -192,16 +192,23 @@ RunIdentity run_identity(const Scene& scene, const Split& split, const TrainConf
     r.train_images.push_back(c.image_name);
     r.train_sizes.push_back({c.width, c.height});
   }
-  // The options that change the training (options.hpp, OptionRole::Training), paths made absolute.
+  r.options = identity_options(config);  // the options that change the training, paths made absolute
+  return r;
+}
+
+nlohmann::json identity_options(const TrainConfig& config, bool also_scene_and_length) {
+  nlohmann::json options = nlohmann::json::object();
   for (const TrainOption& o : train_options()) {
-    if (o.role != OptionRole::Training) continue;
+    if (o.role == OptionRole::Output) continue;
+    if (o.role != OptionRole::Training && !also_scene_and_length) continue;
     nlohmann::json value = o.get(config);
-    if (o.kind == OptionKind::Path && value.is_string() &&
+    // An empty path (no file) stays empty: fs::absolute refuses it.
+    if (o.kind == OptionKind::Path && value.is_string() && !value.get<std::string>().empty() &&
         std::find(o.keywords.begin(), o.keywords.end(), value.get<std::string>()) == o.keywords.end())
       value = absolute_path(value.get<std::string>());
-    r.options[o.name] = std::move(value);
+    options[o.name] = std::move(value);
   }
-  return r;
+  return options;
 }
 
 std::string encode_checkpoint(const RunIdentity& run, const TrainingState& s) {

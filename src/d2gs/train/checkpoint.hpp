@@ -46,6 +46,11 @@ struct RunIdentity {
 
 RunIdentity run_identity(const Scene& scene, const Split& split, const TrainConfig& config);
 
+// The options of `config` that the identity compares (OptionRole::Training), paths made absolute; with
+// `also_scene_and_length`, the Scene and Length ones too (the scene folder, -r, the views, --iterations), as
+// configured rather than resolved: what two configurations of one run folder must share to be the same run.
+nlohmann::json identity_options(const TrainConfig& config, bool also_scene_and_length = false);
+
 // What a training method keeps between iterations (train/methods/method.hpp), by name: groups of float
 // arrays and of byte arrays. The checkpoint stores it without knowing what it means; the method checks
 // it against the run when resuming.
