@@ -61,6 +61,56 @@ struct ImrCommandOptions {
   std::string json;
 };
 
+std::string canonical_folder(const fs::path& p) {
+  std::error_code ec;
+  const fs::path c = fs::weakly_canonical(fs::absolute(p), ec);
+  return (ec ? fs::absolute(p).lexically_normal() : c).string();
+}
+
+// IMR compares models of one scene and split (docs/imr.md): run folders whose config.json records another
+// scene folder, view count or split than the first run folder (or than -s) are refused, models of different
+// methods get a warning. Bare PLY files record nothing and are not checked.
+void check_runs_share_a_scene(const std::vector<std::string>& inputs, const std::string& source_flag) {
+  struct Recorded {
+    std::string input;
+    nlohmann::json values;  // source (canonical), n_views, train_views, test_views
+    std::string method;
+  };
+  std::vector<Recorded> runs;
+  for (const auto& input : inputs) {
+    const fs::path cfg = fs::path(input) / "config.json";
+    if (!fs::is_regular_file(cfg)) continue;
+    Recorded r{input, nlohmann::json::object(), ""};
+    try {
+      const auto j = read_json_file(cfg);
+      if (!j.is_object() || !j.contains("source") || !j["source"].is_string()) fail("no 'source' string");
+      r.values["scene folder"] = canonical_folder(recorded_source(input, j["source"].get<std::string>()));
+      for (const char* key : {"n_views", "train_views", "test_views"})
+        r.values[key] = j.value(key, nlohmann::json());
+      if (j.contains("method") && j["method"].is_string()) r.method = j["method"].get<std::string>();
+    } catch (const nlohmann::json::exception& e) {
+      fail_file(cfg, "cannot read the run's scene ({})", e.what());
+    } catch (const Error& e) {
+      fail_file(cfg, "cannot read the run's scene: {}", e.what());
+    }
+    if (!source_flag.empty() && r.values["scene folder"] != canonical_folder(source_flag))
+      fail_file(cfg, "the run was trained on {}, not on the scene -s {}: IMR compares models of one scene",
+                r.values["scene folder"].get<std::string>(), source_flag);
+    if (!runs.empty())
+      for (const auto& [key, value] : runs.front().values.items())
+        if (r.values[key] != value)
+          fail_file(cfg, "the run's {} is {}, that of {} is {}: IMR compares models of one scene and split", key,
+                    r.values[key].dump(), runs.front().input, value.dump());
+    runs.push_back(std::move(r));
+  }
+  for (const auto& r : runs)
+    if (r.method != runs.front().method) {
+      spdlog::warn("imr: {} was trained with --method {}, {} with {}: IMR is defined over models of one method",
+                   r.input, r.method, runs.front().input, runs.front().method);
+      break;
+    }
+}
+
 // A PLY file, or a run folder's highest point_cloud/iteration_N/point_cloud.ply.
 std::filesystem::path resolve_model(const std::filesystem::path& input) {
 
@@ -164,6 +214,8 @@ int run_imr(const ImrCommandOptions& o) {
   }
   options.debiased = o.debiased;
   options.storage = storage;
+
+  check_runs_share_a_scene(o.inputs, o.source);
 
   Camera reference;
   std::string reference_name = "identity camera at the origin";

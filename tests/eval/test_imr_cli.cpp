@@ -113,6 +113,39 @@ TEST(ImrCli, WarnsWithoutSceneAndRejectsBadInput) {
   EXPECT_NE(empty_run.output.find("point_cloud/iteration_N"), std::string::npos) << empty_run.output;
 }
 
+// Run folders record their scene and split: models of two scenes (or two splits of one) are no IMR, and a
+// -s naming another scene than the runs' would give them the wrong reference camera.
+TEST(ImrCli, RunsOfAnotherSceneOrSplitAreRefused) {
+  const auto dir = test::scratch_dir();
+  const auto fern = test::shared_data() / "nerf_llff_data/fern";
+  const auto horns = test::shared_data() / "llff_nex_reprocessed/horns";
+  const auto run = [&](const std::string& name, const std::filesystem::path& source, int views, const char* method) {
+    std::filesystem::create_directories(dir / name / "point_cloud/iteration_10");
+    write_gaussians_ply(dir / name / "point_cloud/iteration_10/point_cloud.ply", random_model(200, views + name.size()));
+    const nlohmann::json j = {{"source", source.string()}, {"resolution", 8}, {"n_views", views}, {"method", method}};
+    std::ofstream(dir / name / "config.json") << j.dump();
+    return "'" + (dir / name).string() + "'";
+  };
+  const std::string a = run("a", fern, 3, "d2gs"), b = run("b", fern, 3, "d2gs"), c = run("c", horns, 3, "d2gs"),
+                    d = run("d", fern, 6, "d2gs"), e = run("e", fern, 3, "dropgaussian");
+  const auto same = test::run_cli("imr " + a + " " + b + " --samples 100");
+  EXPECT_EQ(same.exit_code, 0) << same.output;
+  EXPECT_EQ(same.output.find("[W]"), std::string::npos) << same.output;
+  const auto scenes = test::run_cli("imr " + a + " " + b + " " + c + " --samples 100");
+  EXPECT_EQ(scenes.exit_code, 1) << scenes.output;
+  EXPECT_NE(scenes.output.find((dir / "c/config.json").string() + ": the run's scene folder is"), std::string::npos)
+      << scenes.output;
+  const auto split = test::run_cli("imr " + a + " " + d + " --samples 100");
+  EXPECT_EQ(split.exit_code, 1) << split.output;
+  EXPECT_NE(split.output.find("the run's n_views is 6, that of"), std::string::npos) << split.output;
+  const auto flag = test::run_cli("imr " + a + " " + b + " -s '" + horns.string() + "' --samples 100");
+  EXPECT_EQ(flag.exit_code, 1) << flag.output;
+  EXPECT_NE(flag.output.find("not on the scene -s"), std::string::npos) << flag.output;
+  const auto methods = test::run_cli("imr " + a + " " + e + " --samples 100");
+  EXPECT_EQ(methods.exit_code, 0) << methods.output;
+  EXPECT_NE(methods.output.find("IMR is defined over models of one method"), std::string::npos) << methods.output;
+}
+
 // Options are checked before any model is read: the models here do not even exist.
 TEST(ImrCli, OptionsAreCheckedBeforeTheModelsAreLoaded) {
   const auto dir = test::scratch_dir();
