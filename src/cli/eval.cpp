@@ -1,5 +1,6 @@
 // d2gs eval: render the held-out views of a trained run and score them (method.md §6).
 #include <cstdlib>
+#include <map>
 #include <optional>
 #include <regex>
 
@@ -20,6 +21,36 @@ namespace d2gs::cli {
 namespace fs = std::filesystem;
 
 namespace {
+
+// The run's cameras.json names each of its views (train/outputs.cpp): a scene whose test views are other
+// images (another scene given with -s, a folder re-processed since) would be scored, and its results.json
+// overwritten, as if it were the run's. A run without cameras.json (or one that names no test view) is not
+// checked.
+void check_test_views_are_the_runs(const fs::path& cameras_json, const Scene& scene, const std::vector<int>& test,
+                                   const fs::path& scene_dir) {
+  std::error_code ec;
+  if (!fs::is_regular_file(cameras_json, ec)) return;
+  std::map<int, std::string> recorded;
+  try {
+    const nlohmann::json cams = read_json_file(cameras_json);
+    if (!cams.is_array()) fail("expected a list of cameras");
+    for (const auto& c : cams)
+      if (c.is_object() && c.contains("global_index") && c.contains("img_name") && c["img_name"].is_string())
+        recorded[json_number<int>(c["global_index"], "global_index")] = c["img_name"].get<std::string>();
+  } catch (const nlohmann::json::exception& e) {
+    fail_file(cameras_json, "cannot read the run's cameras ({})", e.what());
+  } catch (const Error& e) {
+    fail_file(cameras_json, "cannot read the run's cameras: {}", e.what());
+  }
+  for (int v : test) {
+    const auto it = recorded.find(v);
+    if (it == recorded.end()) continue;
+    const std::string now = fs::path(scene.cameras[static_cast<std::size_t>(v)].image_name).stem().string();
+    if (now != it->second)
+      fail_file(cameras_json, "test view {} was image {} when the run was trained, it is {} in {}: not the run's scene",
+                v, it->second, now, scene_dir.string());
+  }
+}
 
 // The highest point_cloud/iteration_N of a run (or the one asked for).
 int pick_iteration(const fs::path& run, int wanted) {
@@ -109,6 +140,7 @@ Run add_eval_command(CLI::App& app) {
     const Scene scene = load_scene(scene_dir, scene_load_options(c));
     for (int v : test)
       if (v < 0 || static_cast<std::size_t>(v) >= scene.cameras.size()) fail_file(cfg_path, "test view {} is not in the scene", v);
+    check_test_views_are_the_runs(run / "cameras.json", scene, test, scene_dir);
     const int it = pick_iteration(run, *iteration);
     const Gaussians model = read_gaussians_ply(run / "point_cloud" / fmt::format("iteration_{}", it) / "point_cloud.ply");
     EvalOptions eo;

@@ -496,6 +496,20 @@ TEST(Trainer, RunFolderServesEvalAndImrCommands) {
   const auto bad = test::run_cli(fmt::format("eval -m '{}'", dir.string()));
   EXPECT_EQ(bad.exit_code, 1);
   EXPECT_NE(bad.output.find("config.json"), std::string::npos) << bad.output;
+  // A scene whose test views are other images than the run's (here: the run's cameras.json renamed one) is
+  // refused before anything is scored, and the run's results.json is left as it was.
+  const std::string scored = read_file(run / "results.json");
+  auto cams = nlohmann::json::parse(read_file(run / "cameras.json"));
+  for (auto& c : cams)
+    if (c["global_index"] == 8) c["img_name"] = "image099";
+  write_file_atomic(run / "cameras.json", cams.dump());
+  const auto other = test::run_cli(fmt::format("eval -m '{}'", run.string()));
+  EXPECT_EQ(other.exit_code, 1) << other.output;
+  EXPECT_NE(other.output.find("cameras.json: test view 8 was image image099 when the run was trained, it is "
+                              "image008 in"),
+            std::string::npos)
+      << other.output;
+  EXPECT_EQ(read_file(run / "results.json"), scored);
 }
 
 // The image source (PIL's resize of the largest folder by default) is recorded and eval scores against the
