@@ -173,6 +173,14 @@ Run add_init_command(CLI::App& app) {
     const std::filesystem::path dir =
         o->output.empty() ? training_geometry_dir(scene, split.train.size()) : std::filesystem::path(o->output);
     check_output_folder(dir);  // before the work: a path under a file fails now
+    // A geometry already there (an earlier d2gs init; d2gs train reuses SCENE/{N}_views) is not replaced
+    // silently, as d2gs train does not replace a run.
+    for (const char* file : {"init.json", "sparse/points3D.ply", "dense/fused.ply"}) {
+      std::error_code ec;
+      if (std::filesystem::exists(dir / file, ec))
+        fail_file(dir, "already holds a training geometry ({}); remove it first, or write this one elsewhere with -o",
+                  file);
+    }
     const TrainingGeometry geo = build_training_geometry(scene, split.train, g);
     write_training_geometry(dir, scene, geo, g);
     std::string line = fmt::format("init: {} sparse points (mean reprojection error {:.3f} px)", geo.sparse.size(),

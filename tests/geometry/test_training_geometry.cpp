@@ -184,6 +184,16 @@ TEST(TrainingGeometry, InitCommandWritesTheLayoutAndTheTrainerLoadsItsDepthPrior
   EXPECT_EQ(bad.exit_code, 1);
   EXPECT_NE(bad.output.find("d2gs: error: "), std::string::npos) << bad.output;
   EXPECT_NE(bad.output.find("at least 2 views"), std::string::npos) << bad.output;
+  // The same folder again: refused before any work, the first geometry left as it was.
+  const std::string cloud = read_file(dir / "init/dense/fused.ply");
+  const auto again = test::run_cli(
+      fmt::format("init -s '{}' --n-views 3 -r 8 -o '{}' --dense-method patchmatch", fern().string(), (dir / "init").string()));
+  EXPECT_EQ(again.exit_code, 1) << again.output;
+  EXPECT_NE(again.output.find((dir / "init").string() + ": already holds a training geometry (init.json)"),
+            std::string::npos)
+      << again.output;
+  EXPECT_EQ(again.output.find("SIFT"), std::string::npos) << "the work was done first:\n" << again.output;
+  EXPECT_EQ(read_file(dir / "init/dense/fused.ply"), cloud);
   // The depth maps as DAFE priors of a short D²GS run that initialises from the same cloud.
   const auto t = test::run_cli(fmt::format(
       "-q train -s '{}' -m '{}' -r 8 --n-views 3 --iterations 2 --method d2gs --init '{}' --dafe-prior '{}' "
