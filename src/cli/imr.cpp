@@ -61,12 +61,6 @@ struct ImrCommandOptions {
   std::string json;
 };
 
-std::string canonical_folder(const fs::path& p) {
-  std::error_code ec;
-  const fs::path c = fs::weakly_canonical(fs::absolute(p), ec);
-  return (ec ? fs::absolute(p).lexically_normal() : c).string();
-}
-
 // IMR compares models of one scene and split (docs/imr.md): run folders whose config.json records another
 // scene folder, view count or split than the first run folder (or than -s) are refused, models of different
 // methods get a warning. Bare PLY files record nothing and are not checked.
@@ -84,7 +78,7 @@ void check_runs_share_a_scene(const std::vector<std::string>& inputs, const std:
     try {
       const auto j = read_json_file(cfg);
       if (!j.is_object() || !j.contains("source") || !j["source"].is_string()) fail("no 'source' string");
-      r.values["scene folder"] = canonical_folder(recorded_source(input, j["source"].get<std::string>()));
+      r.values["scene folder"] = absolute_path(recorded_source(input, j["source"].get<std::string>()).string());
       for (const char* key : {"n_views", "train_views", "test_views"})
         r.values[key] = j.value(key, nlohmann::json());
       if (j.contains("method") && j["method"].is_string()) r.method = j["method"].get<std::string>();
@@ -93,7 +87,7 @@ void check_runs_share_a_scene(const std::vector<std::string>& inputs, const std:
     } catch (const Error& e) {
       fail_file(cfg, "cannot read the run's scene: {}", e.what());
     }
-    if (!source_flag.empty() && r.values["scene folder"] != canonical_folder(source_flag))
+    if (!source_flag.empty() && r.values["scene folder"] != absolute_path(source_flag))
       fail_file(cfg, "the run was trained on {}, not on the scene -s {}: IMR compares models of one scene",
                 r.values["scene folder"].get<std::string>(), source_flag);
     if (!runs.empty())

@@ -55,12 +55,6 @@ std::vector<T> integers(const json& j) {
 
 // ---- the identity of a run ----
 
-std::string absolute_path(const std::string& p) {
-  std::error_code ec;
-  const fs::path a = fs::weakly_canonical(fs::absolute(p), ec);
-  return ec ? fs::absolute(p).lexically_normal().string() : a.string();
-}
-
 json run_to_json(const RunIdentity& r) {
   json sizes = json::array();
   for (const auto& [width, height] : r.train_sizes) sizes.push_back(json::array({width, height}));

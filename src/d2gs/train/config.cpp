@@ -64,6 +64,12 @@ void take_recorded_run_config(TrainConfig& c, const nlohmann::json& recorded) {
     if (!o.absent_means.is_null() && !current.contains(o.name)) o.set(c, o.absent_means);
 }
 
+std::string absolute_path(const std::string& p) {
+  std::error_code ec;
+  const std::filesystem::path a = std::filesystem::weakly_canonical(std::filesystem::absolute(p), ec);
+  return ec ? std::filesystem::absolute(p).lexically_normal().string() : a.string();
+}
+
 std::filesystem::path recorded_source(const std::filesystem::path& model_dir, const std::string& source) {
   const std::filesystem::path p = source;
   if (p.empty() || p.is_absolute()) return p;

@@ -146,6 +146,11 @@ void update_from_json(TrainConfig& c, const nlohmann::json& j, RecordedKeys reco
 // was trained with (options.hpp, value_when_absent: a default changed since is not what it used).
 void take_recorded_run_config(TrainConfig& c, const nlohmann::json& recorded);
 
+// `p` absolute, with the links and dot segments of its existing part resolved (std::filesystem's weakly
+// canonical form; the plain absolute form when that fails): how a run records and compares paths. `p` must
+// not be empty.
+std::string absolute_path(const std::string& p);
+
 // The scene folder recorded in a run's config.json. d2gs train records it absolute; a relative one (an
 // older run, a hand-written file) is taken relative to the run folder `model_dir` when that exists there,
 // else relative to the working folder.
