@@ -99,6 +99,28 @@ TEST(Image, CorruptAndMissingFilesAreErrors) {
   }
 }
 
+// The fuzzer's finding: bytes that are neither PNG nor JPEG but carry DICOM's magic at byte 128 made OpenCV
+// hand them to GDCM, which aborted the process. Only PNG and JPEG are decoded; anything else is a one-line
+// error naming the file, whatever decoder OpenCV would have chosen.
+TEST(Image, OtherFormatsAreRefusedBeforeOpenCvChoosesADecoder) {
+  const auto dir = test::scratch_dir();
+  const auto finding = test::source_dir() / "fuzz/corpus/fuzz_image/dicom-magic-at-128.bin";
+  ASSERT_EQ(read_file(finding).substr(128, 4), "DICM");
+  // A BMP (which OpenCV would decode) is refused too: the scenes' image folders hold PNG and JPEG.
+  const std::string bmp = std::string("BM") + std::string(60, '\0');
+  write_file_atomic(dir / "a.bmp", bmp);
+  for (const auto& path : {finding, dir / "a.bmp"}) {
+    try {
+      read_image(path);
+      ADD_FAILURE() << path << " was decoded";
+    } catch (const Error& e) {
+      const std::string msg = e.what();
+      EXPECT_NE(msg.find(path.string() + ": not a PNG or JPEG file"), std::string::npos) << msg;
+    }
+    EXPECT_THROW(read_image_size(path), Error);
+  }
+}
+
 // A real photograph (room, JPEG) cut short: libjpeg pads the missing rows with grey and only warns, and
 // OpenCV passes the image on. It must be an error naming the file, as for a truncated PNG.
 TEST(Image, TruncatedJpegIsAnErrorNamingTheFile) {

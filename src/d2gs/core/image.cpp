@@ -169,6 +169,12 @@ Image read_image(const fs::path& path) {
 
 Image decode_image(std::string_view bytes, const fs::path& source) {
   if (bytes.empty()) fail_file(source, "cannot decode image (empty file)");
+  // Only PNG and JPEG reach OpenCV: imdecode picks a decoder by the bytes alone, and some of the others it
+  // is built with abort the process on a malformed file instead of failing (GDCM's DICOM reader asserts on
+  // a file with "DICM" at byte 128: fuzz/corpus/fuzz_image/dicom-magic-at-128.bin).
+  static constexpr char png_magic[8] = {'\x89', 'P', 'N', 'G', '\r', '\n', '\x1a', '\n'};
+  if (!is_jpeg(bytes) && !bytes.starts_with(std::string_view(png_magic, sizeof png_magic)))
+    fail_file(source, "not a PNG or JPEG file (the image formats d2gs reads)");
   if (is_jpeg(bytes)) {
     const std::string problem = jpeg_problem(bytes);
     if (!problem.empty()) fail_file(source, "corrupt or truncated JPEG ({})", problem);
