@@ -58,6 +58,11 @@ std::uint32_t be32(const unsigned char* p) {
   return (std::uint32_t{p[0]} << 24) | (std::uint32_t{p[1]} << 16) | (std::uint32_t{p[2]} << 8) | p[3];
 }
 
+bool is_png(std::string_view bytes) {
+  static constexpr char magic[8] = {'\x89', 'P', 'N', 'G', '\r', '\n', '\x1a', '\n'};
+  return bytes.starts_with(std::string_view(magic, sizeof magic));
+}
+
 bool is_jpeg(std::string_view bytes) {
   return bytes.size() >= 3 && static_cast<unsigned char>(bytes[0]) == 0xFF &&
          static_cast<unsigned char>(bytes[1]) == 0xD8 && static_cast<unsigned char>(bytes[2]) == 0xFF;
@@ -172,10 +177,9 @@ Image decode_image(std::string_view bytes, const fs::path& source) {
   // Only PNG and JPEG reach OpenCV: imdecode picks a decoder by the bytes alone, and some of the others it
   // is built with abort the process on a malformed file instead of failing (GDCM's DICOM reader asserts on
   // a file with "DICM" at byte 128: fuzz/corpus/fuzz_image/dicom-magic-at-128.bin).
-  static constexpr char png_magic[8] = {'\x89', 'P', 'N', 'G', '\r', '\n', '\x1a', '\n'};
-  if (!is_jpeg(bytes) && !bytes.starts_with(std::string_view(png_magic, sizeof png_magic)))
-    fail_file(source, "not a PNG or JPEG file (the image formats d2gs reads)");
-  if (is_jpeg(bytes)) {
+  const bool jpeg = is_jpeg(bytes);
+  if (!jpeg && !is_png(bytes)) fail_file(source, "not a PNG or JPEG file (the image formats d2gs reads)");
+  if (jpeg) {
     const std::string problem = jpeg_problem(bytes);
     if (!problem.empty()) fail_file(source, "corrupt or truncated JPEG ({})", problem);
   }
@@ -198,8 +202,7 @@ ImageSize read_image_size(const fs::path& path) {
   unsigned char head[32] = {};
   in.read(reinterpret_cast<char*>(head), sizeof head);
   const auto got = in.gcount();
-  static constexpr unsigned char png_magic[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
-  if (got >= 24 && std::equal(png_magic, png_magic + 8, head)) {
+  if (got >= 24 && is_png(std::string_view(reinterpret_cast<const char*>(head), static_cast<std::size_t>(got)))) {
     if (!std::equal(head + 12, head + 16, reinterpret_cast<const unsigned char*>("IHDR")))
       fail_file(path, "corrupt PNG header");
     const auto w = be32(head + 16), h = be32(head + 20);
