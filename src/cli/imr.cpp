@@ -12,6 +12,7 @@
 #include <chrono>
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -61,16 +62,25 @@ struct ImrCommandOptions {
   std::string json;
 };
 
+// The scene a run folder records, as the reference camera is taken from it when -s is not given.
+struct RecordedScene {
+  std::string source;  // the scene folder, resolved from the run folder (recorded_source)
+  int resolution = 1;
+};
+
 // IMR compares models of one scene and split (docs/imr.md): run folders whose config.json records another
 // scene folder, view count or split than the first run folder (or than -s) are refused, models of different
-// methods get a warning. Bare PLY files record nothing and are not checked.
-void check_runs_share_a_scene(const std::vector<std::string>& inputs, const std::string& source_flag) {
+// methods get a warning. Bare PLY files record nothing and are not checked. Without -s, returns the scene and
+// resolution of the first run folder (whose scene must then be a folder from here); none without run folders.
+std::optional<RecordedScene> check_runs_share_a_scene(const std::vector<std::string>& inputs,
+                                                      const std::string& source_flag) {
   struct Recorded {
     std::string input;
     nlohmann::json values;  // source (canonical), n_views, train_views, test_views
     std::string method;
   };
   std::vector<Recorded> runs;
+  std::optional<RecordedScene> first;
   for (const auto& input : inputs) {
     const fs::path cfg = fs::path(input) / "config.json";
     if (!fs::is_regular_file(cfg)) continue;
@@ -78,10 +88,19 @@ void check_runs_share_a_scene(const std::vector<std::string>& inputs, const std:
     try {
       const auto j = read_json_file(cfg);
       if (!j.is_object() || !j.contains("source") || !j["source"].is_string()) fail("no 'source' string");
-      r.values["scene folder"] = absolute_path(recorded_source(input, j["source"].get<std::string>()).string());
+      const std::string source = recorded_source(input, j["source"].get<std::string>()).string();
+      r.values["scene folder"] = absolute_path(source);
       for (const char* key : {"n_views", "train_views", "test_views"})
         r.values[key] = j.value(key, nlohmann::json());
       if (j.contains("method") && j["method"].is_string()) r.method = j["method"].get<std::string>();
+      if (runs.empty() && source_flag.empty()) {
+        if (!j.contains("resolution")) fail("no 'resolution'");
+        RecordedScene scene{source, json_number<int>(j["resolution"], "resolution")};
+        check_resolution(scene.resolution);
+        if (!fs::is_directory(scene.source))
+          fail("the recorded scene '{}' is not a folder from here (give it with -s)", scene.source);
+        first = std::move(scene);
+      }
     } catch (const nlohmann::json::exception& e) {
       fail_file(cfg, "cannot read the run's scene ({})", e.what());
     } catch (const Error& e) {
@@ -103,6 +122,7 @@ void check_runs_share_a_scene(const std::vector<std::string>& inputs, const std:
                    r.input, r.method, runs.front().input, runs.front().method);
       break;
     }
+  return first;
 }
 
 // A PLY file, or a run folder's highest point_cloud/iteration_N/point_cloud.ply.
@@ -209,32 +229,14 @@ int run_imr(const ImrCommandOptions& o) {
   options.debiased = o.debiased;
   options.storage = storage;
 
-  check_runs_share_a_scene(o.inputs, o.source);
-
   Camera reference;
   std::string reference_name = "identity camera at the origin";
   std::string source = o.source;
   int resolution = o.resolution;
-  if (source.empty()) {
-    // A training run folder records its scene: take the reference camera from there.
-    for (const auto& input : o.inputs) {
-      const fs::path cfg = fs::path(input) / "config.json";
-      if (!fs::is_regular_file(cfg)) continue;
-      try {
-        const auto j = read_json_file(cfg);
-        if (!j.is_object() || !j.contains("source") || !j["source"].is_string() || !j.contains("resolution"))
-          fail("no 'source' string and 'resolution'");
-        resolution = json_number<int>(j["resolution"], "resolution");
-        check_resolution(resolution);
-        source = recorded_source(input, j["source"].get<std::string>()).string();
-        if (!fs::is_directory(source)) fail("the recorded scene '{}' is not a folder from here (give it with -s)", source);
-        break;
-      } catch (const nlohmann::json::exception& e) {
-        fail_file(cfg, "cannot read the run's scene ({})", e.what());
-      } catch (const Error& e) {
-        fail_file(cfg, "cannot read the run's scene: {}", e.what());
-      }
-    }
+  // A training run folder records its scene: without -s, the reference camera is taken from there.
+  if (const auto recorded = check_runs_share_a_scene(o.inputs, o.source)) {
+    source = recorded->source;
+    resolution = recorded->resolution;
   }
   if (!source.empty()) {
     SceneLoadOptions load;

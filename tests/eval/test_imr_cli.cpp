@@ -144,6 +144,25 @@ TEST(ImrCli, RunsOfAnotherSceneOrSplitAreRefused) {
   const auto methods = test::run_cli("imr " + a + " " + e + " --samples 100");
   EXPECT_EQ(methods.exit_code, 0) << methods.output;
   EXPECT_NE(methods.output.find("IMR is defined over models of one method"), std::string::npos) << methods.output;
+
+  // Without -s the reference camera comes from the first run's recorded scene, which must be there.
+  const std::string gone = run("gone", dir / "no_such_scene", 3, "d2gs"),
+                    gone2 = run("gone2", dir / "no_such_scene", 3, "d2gs");
+  const auto missing = test::run_cli("imr " + gone + " " + gone2 + " --samples 100");
+  EXPECT_EQ(missing.exit_code, 1) << missing.output;
+  EXPECT_NE(missing.output.find((dir / "gone/config.json").string() + ": cannot read the run's scene: the recorded "
+                                "scene '" + (dir / "no_such_scene").string() + "' is not a folder from here"),
+            std::string::npos)
+      << missing.output;
+  std::ofstream(dir / "b/config.json") << nlohmann::json{{"source", fern.string()}, {"n_views", 3}}.dump();
+  const auto no_resolution = test::run_cli("imr " + b + " " + a + " --samples 100");
+  EXPECT_EQ(no_resolution.exit_code, 1) << no_resolution.output;
+  EXPECT_NE(no_resolution.output.find((dir / "b/config.json").string() + ": cannot read the run's scene: no 'resolution'"),
+            std::string::npos)
+      << no_resolution.output;
+  // With -s the recorded resolution is not needed (the flag's is used).
+  const auto with_flag = test::run_cli("imr " + b + " " + a + " -s '" + fern.string() + "' -r 8 --samples 100");
+  EXPECT_EQ(with_flag.exit_code, 0) << with_flag.output;
 }
 
 // Options are checked before any model is read: the models here do not even exist.
