@@ -116,6 +116,48 @@ TEST(RunReport, UnfinishedRunStillReportsAndNonRunIsAnError) {
   }
 }
 
+// Recorded files whose values have another JSON type than d2gs writes: one line naming the file and the
+// key, not the JSON library's internal message.
+TEST(ReportCli, MistypedValuesInTheRunsFilesNameTheFileAndTheKey) {
+  const auto dir = test::scratch_dir();
+  const auto report = [&](const std::string& name) {
+    return test::run_cli("report -m '" + (dir / name).string() + "' -o '" + (dir / (name + ".html")).string() + "'");
+  };
+  const auto expect_error = [&](const std::string& name, const std::string& message) {
+    const auto r = report(name);
+    EXPECT_EQ(r.exit_code, 1) << r.output;
+    EXPECT_NE(r.output.find("d2gs: error: " + (dir / name).string() + "/" + message), std::string::npos) << r.output;
+    EXPECT_EQ(r.output.find("internal"), std::string::npos) << r.output;
+    EXPECT_FALSE(fs::exists(dir / (name + ".html")));
+  };
+  const auto edit_config = [&](const std::string& name, const char* key, const nlohmann::json& value) {
+    test::make_fake_run(dir / name);
+    nlohmann::json c = nlohmann::json::parse(read_file(dir / name / "config.json"));
+    c[key] = value;
+    std::ofstream(dir / name / "config.json") << c.dump();
+  };
+  edit_config("names", "split", {{"train", {1, 2}}, {"test", {"a", "b"}}});
+  expect_error("names", "config.json: key 'split.test[0]' must be an integer");
+  edit_config("number", "split", {{"train", {1, 2}}, {"test", 5}});
+  expect_error("number", "config.json: key 'split.test' must be a list of numbers");
+  test::make_fake_run(dir / "cameras");
+  std::ofstream(dir / "cameras/cameras.json") << "[1, 2, 3]";
+  expect_error("cameras", "cameras.json: camera entry 0 is not an object");
+  test::make_fake_run(dir / "loss");
+  std::ofstream(dir / "loss/train_log.jsonl") << "{\"iteration\":1,\"loss\":\"abc\"}\n{\"iteration\":2}\n";
+  expect_error("loss", "train_log.jsonl: line 1: 'loss' must be a number");
+  test::make_fake_run(dir / "event");
+  std::ofstream(dir / "event/train_log.jsonl") << "{\"iteration\":1,\"event\":7}\n{\"iteration\":2}\n";
+  expect_error("event", "train_log.jsonl: line 1: 'event' must be a string");
+  // A split that is no object and an oracle flag that is no boolean are shown as unknown, not an error.
+  edit_config("odd", "split", 3);
+  nlohmann::json c = nlohmann::json::parse(read_file(dir / "odd/config.json"));
+  c["init_is_oracle"] = "yes";
+  std::ofstream(dir / "odd/config.json") << c.dump();
+  const auto odd = report("odd");
+  EXPECT_EQ(odd.exit_code, 0) << odd.output;
+}
+
 TEST(ReportCli, WritesTheReportAndRejectsAFolderThatIsNoRun) {
   const auto dir = test::scratch_dir();
   test::make_fake_run(dir / "run");

@@ -39,6 +39,14 @@ void truncate_from(std::vector<double>& its, std::vector<std::vector<double>*> c
   for (auto* c : columns) c->resize(keep);
 }
 
+// A log record's optional number: NaN where the key is absent or null (a NaN is written as null).
+double log_number(const nlohmann::json& record, const char* key, const fs::path& path, int line) {
+  if (!record.contains(key) || record[key].is_null()) return std::nan("");
+  if (!record[key].is_number())
+    fail_file(path, "line {}: '{}' must be a number, got {}", line, key, json_detail::shown(record[key]));
+  return record[key].get<double>();
+}
+
 }  // namespace
 
 TrainLog read_train_log(const fs::path& path) {
@@ -61,18 +69,20 @@ TrainLog read_train_log(const fs::path& path) {
     if (!j.is_object() || !j.contains("iteration") || !j["iteration"].is_number())
       fail_file(path, "line {} is not a log record with an iteration", number);
     const double it = j["iteration"].get<double>();
+    if (j.contains("event") && !j["event"].is_string())
+      fail_file(path, "line {}: 'event' must be a string, got {}", number, json_detail::shown(j["event"]));
     const std::string event = j.value("event", "");
     if (event == "test") {
       truncate_from(log.test_iteration, {&log.test_psnr, &log.test_ssim}, it);
       log.test_iteration.push_back(it);
-      log.test_psnr.push_back(j.value("psnr", std::nan("")));
-      log.test_ssim.push_back(j.value("ssim", std::nan("")));
+      log.test_psnr.push_back(log_number(j, "psnr", path, number));
+      log.test_ssim.push_back(log_number(j, "ssim", path, number));
     } else if (event.empty()) {
       truncate_from(log.iteration, {&log.loss, &log.gaussians, &log.elapsed_s}, it);
       log.iteration.push_back(it);
-      log.loss.push_back(j.value("loss", std::nan("")));
-      log.gaussians.push_back(j.value("gaussians", std::nan("")));
-      log.elapsed_s.push_back(j.value("elapsed_s", std::nan("")));
+      log.loss.push_back(log_number(j, "loss", path, number));
+      log.gaussians.push_back(log_number(j, "gaussians", path, number));
+      log.elapsed_s.push_back(log_number(j, "elapsed_s", path, number));
     }
   }
   return log;
@@ -147,16 +157,27 @@ std::optional<ReferenceCamera> reference_camera(const fs::path& dir, const nlohm
   const nlohmann::json cams = read_json_file(path);
   if (!cams.is_array() || cams.empty()) fail_file(path, "expected a non-empty array of cameras");
   std::vector<int> test;
-  if (config.is_object() && config.contains("split") && config["split"].contains("test"))
-    test = config["split"]["test"].get<std::vector<int>>();
+  if (config.is_object() && config.contains("split") && config["split"].is_object() && config["split"].contains("test")) {
+    try {
+      test = json_number_list<int>(config["split"]["test"], "split.test", 0);
+    } catch (const Error& e) {
+      fail_file(dir / "config.json", "{}", e.what());
+    }
+  }
+  for (std::size_t i = 0; i < cams.size(); ++i)
+    if (!cams[i].is_object()) fail_file(path, "camera entry {} is not an object but {}", i, json_detail::shown(cams[i]));
   const nlohmann::json* pick = nullptr;
   if (!test.empty())
     for (const auto& c : cams)
-      if (c.value("global_index", -1) == test.front()) pick = &c;
+      if (c.contains("global_index") && c["global_index"].is_number_integer() &&
+          c["global_index"].get<std::int64_t>() == test.front())
+        pick = &c;
   if (!pick) pick = &cams.back();
   try {
     ReferenceCamera r;
-    r.name = fmt::format("{} (image {})", (*pick).value("img_name", std::string("?")), (*pick).value("global_index", -1));
+    const auto& p = *pick;
+    r.name = fmt::format("{} (image {})", p.contains("img_name") && p["img_name"].is_string() ? p["img_name"].get<std::string>() : "?",
+                         p.contains("global_index") ? p["global_index"].dump() : "?");
     const auto& pos = (*pick).at("position");
     const auto& rot = (*pick).at("rotation");  // rows of the camera-to-world rotation
     for (int k = 0; k < 3; ++k) {

@@ -63,14 +63,18 @@ std::string summary_html(const RunData& run) {
     const auto& v = c[key];
     return v.is_string() ? v.get<std::string>() : v.dump();
   };
+  const auto split = [&](const char* key) -> std::string {
+    if (!c.is_object() || !c.contains("split") || !c["split"].is_object() || !c["split"].contains(key)) return "—";
+    return c["split"][key].dump();
+  };
+  const bool oracle = c.is_object() && c.contains("init_is_oracle") && c["init_is_oracle"].is_boolean() &&
+                      c["init_is_oracle"].get<bool>();
   std::vector<std::vector<std::string>> rows = {
       {"method", run.method()},
       {"scene", get("source")},
       {"resolution", "1/" + get("resolution")},
-      {"training views", c.is_object() && c.contains("split") ? c["split"].value("train", nlohmann::json::array()).dump()
-                                                               : std::string("—")},
-      {"test views", c.is_object() && c.contains("split") ? c["split"].value("test", nlohmann::json::array()).dump()
-                                                           : std::string("—")},
+      {"training views", split("train")},
+      {"test views", split("test")},
       {"iterations", get("iterations")},
       {"seed", get("seed")},
       {"preset", [&] {
@@ -79,7 +83,7 @@ std::string summary_html(const RunData& run) {
          if (preset.empty() && scene.empty()) return std::string("none (the method's defaults and flags)");
          return preset.empty() ? "scene " + scene : scene.empty() ? preset : preset + " / scene " + scene;
        }()},
-      {"initial points", get("init") + (c.is_object() && c.value("init_is_oracle", false) ? " (ORACLE: saw the test views)" : "")},
+      {"initial points", get("init") + (oracle ? " (ORACLE: saw the test views)" : "")},
       {"final model", run.iteration >= 0 ? fmt::format("iteration {}", run.iteration) : std::string("none saved")},
   };
   if (run.results.is_object()) {
