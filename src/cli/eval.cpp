@@ -1,4 +1,5 @@
 // d2gs eval: render the held-out views of a trained run and score them (method.md §6).
+#include <cmath>
 #include <cstdlib>
 #include <map>
 #include <optional>
@@ -22,21 +23,36 @@ namespace fs = std::filesystem;
 
 namespace {
 
-// The run's cameras.json names each of its views (train/outputs.cpp): a scene whose test views are other
-// images (another scene given with -s, a folder re-processed since) would be scored, and its results.json
-// overwritten, as if it were the run's. A run without cameras.json (or one that names no test view) is not
-// checked.
+// The run's cameras.json names each of its views and records its size and pose (train/outputs.cpp): a
+// scene whose test views are other images (another scene given with -s, a folder re-processed since) would
+// be scored, and its results.json overwritten, as if it were the run's. The sizes are compared unless the
+// ground truth is asked from another image source (whose sizes may round differently). A run without
+// cameras.json (or one that names no test view) is not checked.
 void check_test_views_are_the_runs(const fs::path& cameras_json, const Scene& scene, const std::vector<int>& test,
-                                   const fs::path& scene_dir) {
+                                   const fs::path& scene_dir, bool compare_sizes) {
   std::error_code ec;
   if (!fs::is_regular_file(cameras_json, ec)) return;
-  std::map<int, std::string> recorded;
+  struct Recorded {
+    std::string name;
+    std::optional<std::pair<int, int>> size;
+    std::optional<glm::dvec3> position;
+  };
+  std::map<int, Recorded> recorded;
   try {
     const nlohmann::json cams = read_json_file(cameras_json);
     if (!cams.is_array()) fail("expected a list of cameras");
-    for (const auto& c : cams)
-      if (c.is_object() && c.contains("global_index") && c.contains("img_name") && c["img_name"].is_string())
-        recorded[json_number<int>(c["global_index"], "global_index")] = c["img_name"].get<std::string>();
+    for (const auto& c : cams) {
+      if (!c.is_object() || !c.contains("global_index") || !c.contains("img_name") || !c["img_name"].is_string()) continue;
+      Recorded r{c["img_name"].get<std::string>(), std::nullopt, std::nullopt};
+      if (c.contains("width") && c.contains("height"))
+        r.size = std::pair{json_number<int>(c["width"], "width"), json_number<int>(c["height"], "height")};
+      if (c.contains("position")) {
+        const auto p = json_number_list<double>(c["position"], "position");
+        if (p.size() != 3) fail("key 'position' must hold 3 numbers, got {}", p.size());
+        r.position = glm::dvec3(p[0], p[1], p[2]);
+      }
+      recorded[json_number<int>(c["global_index"], "global_index")] = std::move(r);
+    }
   } catch (const nlohmann::json::exception& e) {
     fail_file(cameras_json, "cannot read the run's cameras ({})", e.what());
   } catch (const Error& e) {
@@ -45,10 +61,24 @@ void check_test_views_are_the_runs(const fs::path& cameras_json, const Scene& sc
   for (int v : test) {
     const auto it = recorded.find(v);
     if (it == recorded.end()) continue;
-    const std::string now = fs::path(scene.cameras[static_cast<std::size_t>(v)].image_name).stem().string();
-    if (now != it->second)
+    const Camera& cam = scene.cameras[static_cast<std::size_t>(v)];
+    const std::string now = fs::path(cam.image_name).stem().string();
+    if (now != it->second.name)
       fail_file(cameras_json, "test view {} was image {} when the run was trained, it is {} in {}: not the run's scene",
-                v, it->second, now, scene_dir.string());
+                v, it->second.name, now, scene_dir.string());
+    if (compare_sizes && it->second.size && *it->second.size != std::pair{cam.width, cam.height})
+      fail_file(cameras_json, "test view {} ({}) was {}x{} when the run was trained, it is {}x{} in {}: not the run's scene "
+                "or resolution", v, now, it->second.size->first, it->second.size->second, cam.width, cam.height,
+                scene_dir.string());
+    if (it->second.position) {
+      // The same loader on the same files gives the same double; 1e-6 relative allows for a rewritten file.
+      const glm::dvec3 was = *it->second.position, is = cam.center_world();
+      for (int k = 0; k < 3; ++k)
+        if (!(std::abs(was[k] - is[k]) <= 1e-6 * (1.0 + std::abs(was[k]))))
+          fail_file(cameras_json, "test view {} ({}) was at ({:.6g}, {:.6g}, {:.6g}) when the run was trained, it is at "
+                    "({:.6g}, {:.6g}, {:.6g}) in {}: not the run's scene", v, now, was.x, was.y, was.z, is.x, is.y,
+                    is.z, scene_dir.string());
+    }
   }
 }
 
@@ -58,7 +88,7 @@ int pick_iteration(const fs::path& run, int wanted) {
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) fail_file(dir, "no saved models (expected point_cloud/iteration_N/point_cloud.ply)");
   int best = -1;
-  const std::regex re("iteration_([0-9]+)");
+  const std::regex re("iteration_([0-9]{1,9})");  // longer numbers are no iteration d2gs saves
   for (const auto& e : fs::directory_iterator(dir)) {
     std::smatch m;
     const std::string name = e.path().filename().string();
@@ -90,7 +120,8 @@ Run add_eval_command(CLI::App& app) {
   auto source = std::make_shared<std::string>();
   if (const char* env = std::getenv("D2GS_LPIPS_WEIGHTS")) *lpips_weights = env;
   cmd->add_option("-m,--model-path", *model_dir, "Run folder written by d2gs train")->required();
-  cmd->add_option("--iteration", *iteration, "Model iteration to evaluate (default: the last saved)");
+  cmd->add_option("--iteration", *iteration, "Model iteration to evaluate (default: the last saved)")
+      ->check(CLI::PositiveNumber);
   cmd->add_flag("--json", *json_only, "Print the results as JSON instead of a table");
   cmd->add_option("-s,--source", *source,
                   "Scene folder (default: the one recorded in MODEL/config.json; a relative recorded path is taken "
@@ -116,12 +147,14 @@ Run add_eval_command(CLI::App& app) {
     const fs::path run = *model_dir;
     const fs::path cfg_path = run / "config.json";
     nlohmann::json cj = read_json_file(cfg_path);
-    if (!cj.contains("split") || !cj["split"].contains("test")) fail_file(cfg_path, "has no recorded split");
+    if (!cj.is_object() || !cj.contains("split") || !cj["split"].is_object() || !cj["split"].contains("test"))
+      fail_file(cfg_path, "has no recorded split");
     std::vector<int> test;
     TrainConfig c;
     bool oracle = false;
     try {
       test = json_number_list<int>(cj["split"]["test"], "split.test", 0);
+      if (test.empty()) fail("records no test views (split.test is empty): nothing to evaluate");
       if (cj.contains("init_is_oracle") && !cj["init_is_oracle"].is_boolean())
         fail("key 'init_is_oracle' must be true or false");
       oracle = cj.value("init_is_oracle", false);
@@ -140,9 +173,11 @@ Run add_eval_command(CLI::App& app) {
     const Scene scene = load_scene(scene_dir, scene_load_options(c));
     for (int v : test)
       if (v < 0 || static_cast<std::size_t>(v) >= scene.cameras.size()) fail_file(cfg_path, "test view {} is not in the scene", v);
-    check_test_views_are_the_runs(run / "cameras.json", scene, test, scene_dir);
+    check_test_views_are_the_runs(run / "cameras.json", scene, test, scene_dir, image_source->empty());
     const int it = pick_iteration(run, *iteration);
-    const Gaussians model = read_gaussians_ply(run / "point_cloud" / fmt::format("iteration_{}", it) / "point_cloud.ply");
+    const fs::path ply = run / "point_cloud" / fmt::format("iteration_{}", it) / "point_cloud.ply";
+    const Gaussians model = read_gaussians_ply(ply);
+    if (model.size() == 0) fail_file(ply, "the model has no Gaussians (0 vertices): nothing to evaluate");
     EvalOptions eo;
     eo.render_dir = run / "test" / fmt::format("ours_{}", it);
     eo.lpips = lpips ? &*lpips : nullptr;

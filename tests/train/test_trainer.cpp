@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <functional>
 #include <limits>
 #include <map>
 #include <memory>
@@ -499,17 +500,48 @@ TEST(Trainer, RunFolderServesEvalAndImrCommands) {
   // A scene whose test views are other images than the run's (here: the run's cameras.json renamed one) is
   // refused before anything is scored, and the run's results.json is left as it was.
   const std::string scored = read_file(run / "results.json");
-  auto cams = nlohmann::json::parse(read_file(run / "cameras.json"));
-  for (auto& c : cams)
-    if (c["global_index"] == 8) c["img_name"] = "image099";
-  write_file_atomic(run / "cameras.json", cams.dump());
-  const auto other = test::run_cli(fmt::format("eval -m '{}'", run.string()));
-  EXPECT_EQ(other.exit_code, 1) << other.output;
-  EXPECT_NE(other.output.find("cameras.json: test view 8 was image image099 when the run was trained, it is "
-                              "image008 in"),
-            std::string::npos)
-      << other.output;
+  const std::string recorded_cameras = read_file(run / "cameras.json");
+  const auto refused = [&](const std::function<void(nlohmann::json&)>& edit, const std::string& message) {
+    auto cams = nlohmann::json::parse(recorded_cameras);
+    for (auto& c : cams)
+      if (c["global_index"] == 8) edit(c);
+    write_file_atomic(run / "cameras.json", cams.dump());
+    const auto other = test::run_cli(fmt::format("eval -m '{}'", run.string()));
+    EXPECT_EQ(other.exit_code, 1) << other.output;
+    EXPECT_NE(other.output.find("cameras.json: test view 8 " + message), std::string::npos) << other.output;
+    EXPECT_EQ(read_file(run / "results.json"), scored);
+  };
+  refused([](nlohmann::json& c) { c["img_name"] = "image099"; },
+          "was image image099 when the run was trained, it is image008 in");
+  // The same names with other poses or sizes (another scene named alike, e.g. d2gs demo's): refused too.
+  refused([](nlohmann::json& c) { c["position"][1] = c["position"][1].get<double>() + 0.01; },
+          "(image008) was at (");
+  refused([](nlohmann::json& c) { c["width"] = 63; }, "(image008) was 63x378 when the run was trained, it is 504x378");
+  write_file_atomic(run / "cameras.json", recorded_cameras);
+  // Nothing to score: a model without Gaussians, a run that records no test view.
+  const auto ply = run / "point_cloud/iteration_4/point_cloud.ply";
+  const std::string model = read_file(ply);
+  write_gaussians_ply(ply, Gaussians{});
+  const auto empty_model = test::run_cli(fmt::format("eval -m '{}'", run.string()));
+  EXPECT_EQ(empty_model.exit_code, 1) << empty_model.output;
+  EXPECT_NE(empty_model.output.find("point_cloud.ply: the model has no Gaussians"), std::string::npos) << empty_model.output;
+  write_file_atomic(ply, model);
+  const std::string config = read_file(run / "config.json");
+  auto no_test = nlohmann::json::parse(config);
+  no_test["split"]["test"] = nlohmann::json::array();
+  write_file_atomic(run / "config.json", no_test.dump());
+  const auto no_views = test::run_cli(fmt::format("eval -m '{}'", run.string()));
+  EXPECT_EQ(no_views.exit_code, 1) << no_views.output;
+  EXPECT_NE(no_views.output.find("config.json: records no test views"), std::string::npos) << no_views.output;
+  write_file_atomic(run / "config.json", config);
   EXPECT_EQ(read_file(run / "results.json"), scored);
+  // --iteration counts from 1; a folder whose number no int holds is not a saved iteration.
+  EXPECT_NE(test::run_cli(fmt::format("eval -m '{}' --iteration 0", run.string())).exit_code, 0);
+  fs::create_directories(run / "point_cloud/iteration_99999999999");
+  write_file_atomic(run / "point_cloud/iteration_99999999999/point_cloud.ply", model);
+  const auto huge = test::run_cli(fmt::format("-q eval -m '{}' --json", run.string()));
+  EXPECT_EQ(huge.exit_code, 0) << huge.output;
+  EXPECT_EQ(nlohmann::json::parse(read_file(run / "results.json"))["iteration"], 4);
 }
 
 // The image source (PIL's resize of the largest folder by default) is recorded and eval scores against the
