@@ -1,6 +1,7 @@
 // d2gs: sparse-view 3D Gaussian Splatting (D²GS) from the command line.
 #include <cstdio>
 #include <exception>
+#include <filesystem>
 #include <map>
 #include <string>
 
@@ -49,6 +50,15 @@ int main(int argc, char** argv) {
     return 2;
   } catch (const d2gs::Error& e) {
     std::fprintf(stderr, "d2gs: error: %s\n", e.what());
+    return 1;
+  } catch (const std::filesystem::filesystem_error& e) {
+    // A file system call that failed where no check foresaw it (a folder that cannot be created, a disk that
+    // is full): the path and the reason, as the library's own errors name them.
+    std::string what = e.what();
+    if (const std::string prefix = "filesystem error: "; what.rfind(prefix, 0) == 0) what.erase(0, prefix.size());
+    if (const auto bracket = what.find(" ["); bracket != std::string::npos) what.erase(bracket);
+    if (e.path1().empty()) std::fprintf(stderr, "d2gs: error: %s\n", what.c_str());
+    else std::fprintf(stderr, "d2gs: error: %s: %s\n", e.path1().c_str(), what.c_str());
     return 1;
   } catch (const std::bad_alloc&) {
     std::fprintf(stderr, "d2gs: error: out of memory\n");

@@ -7,6 +7,7 @@
 // with --alpha DIR/<stem>_alpha.png (8-bit).
 #include <algorithm>
 #include <filesystem>
+#include <map>
 #include <memory>
 #include <string>
 #include <vector>
@@ -38,6 +39,49 @@ struct RenderCommandOptions {
   std::string device;
 };
 
+// The files a view is written to: DIR/<image stem>.png, and with --alpha / --depth the extra maps.
+std::vector<std::string> output_names(const std::string& stem, const RenderCommandOptions& o) {
+  std::vector<std::string> names = {stem + ".png"};
+  if (o.alpha) names.push_back(stem + "_alpha.png");
+  if (o.depth) {
+    names.push_back(stem + "_depth.npy");
+    names.push_back(stem + "_depth.png");
+  }
+  return names;
+}
+
+// Before any rendering: no two views may be written to one file (Blender's train/r_0 and test/r_0, an LLFF
+// folder with image018.jpg and image018.png), no file already there is replaced, and the scene's own image
+// folders are not written into.
+void check_render_outputs(const std::filesystem::path& out_dir, const Scene& scene, const std::vector<int>& views,
+                          const RenderCommandOptions& o) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (fs::exists(out_dir, ec)) {
+    // The folder each camera's image is read from, and LLFF's other resolutions (SCENE/images_N).
+    for (const auto& cam : scene.cameras)
+      if (fs::equivalent(out_dir, cam.image_path.parent_path(), ec))
+        fail_file(out_dir, "holds the scene's images ({}): render into another folder", cam.image_name);
+    const fs::path parent = fs::absolute(out_dir, ec).lexically_normal().parent_path();
+    const std::string name = fs::absolute(out_dir, ec).lexically_normal().filename().string();
+    if (name.rfind("images", 0) == 0 && fs::equivalent(parent, o.scene.source, ec))
+      fail_file(out_dir, "is one of the scene's image folders: render into another folder");
+  }
+  std::map<std::string, int> taken;
+  for (const int v : views) {
+    const Camera& cam = scene.cameras[static_cast<std::size_t>(v)];
+    const std::string stem = fs::path(cam.image_name).stem().string();
+    if (const auto [it, fresh] = taken.emplace(stem, v); !fresh)
+      fail("views {} ({}) and {} ({}) would both be written to {}: render them into separate folders (--split "
+           "train, --split test)", it->second, scene.cameras[static_cast<std::size_t>(it->second)].image_name, v,
+           cam.image_name, (out_dir / (stem + ".png")).string());
+    for (const auto& name : output_names(stem, o))
+      if (fs::exists(out_dir / name, ec))
+        fail_file(out_dir / name, "exists: render writes a file per view and replaces none; choose a new or empty "
+                  "folder, or remove it");
+  }
+}
+
 int run_render(const RenderCommandOptions& o) {
   if (o.split != "test" && o.split != "train" && o.split != "all")
     fail("--split must be test, train or all (got '{}')", o.split);
@@ -55,6 +99,7 @@ int run_render(const RenderCommandOptions& o) {
   else if (o.split == "train") views = split.train;
   else
     for (int i = 0; i < static_cast<int>(scene.cameras.size()); ++i) views.push_back(i);
+  check_render_outputs(out_dir, scene, views, o);
   std::filesystem::create_directories(out_dir);
 
   log_device_choice(backend);

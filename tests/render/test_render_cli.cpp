@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/image.hpp"
 #include "d2gs/core/npy.hpp"
 #include "d2gs/model/ply.hpp"
@@ -87,6 +88,44 @@ TEST(RenderCli, RefusesShDegreeAboveTheModelsAnEmptyModelAndAnOutputUnderAFile) 
   EXPECT_EQ(under.exit_code, 1) << under.output;
   EXPECT_NE(under.output.find("is a file, not a folder"), std::string::npos) << under.output;
   EXPECT_EQ(under.output.find("internal"), std::string::npos) << under.output;
+  // A folder that cannot be created although its parent looks writable (root in /proc): one line, exit 1.
+  const auto proc = render((dir / "degree1.ply").string(), "/proc/d2gs_render_test", "");
+  EXPECT_EQ(proc.exit_code, 1) << proc.output;
+  EXPECT_NE(proc.output.find("/proc/d2gs_render_test"), std::string::npos) << proc.output;
+  EXPECT_EQ(proc.output.find("internal"), std::string::npos) << proc.output;
+}
+
+// render replaces no file: not its own earlier renders, not the scene's images, and no two views of one
+// command (Blender's train/r_0 and test/r_0 have one stem).
+TEST(RenderCli, ReplacesNoFileAndWritesNoTwoViewsToOne) {
+  const auto fern = shared_data() / "nerf_llff_data/fern";
+  const auto lego = shared_data() / "nerf_synthetic/lego";
+  const auto dir = scratch_dir();
+  Gaussians model;
+  model.resize(50, 0);
+  for (std::size_t i = 0; i < model.size(); ++i) model.means[i * 3 + 2] = 5.0f;
+  write_gaussians_ply(dir / "m.ply", model);
+  const auto render = [&](const std::filesystem::path& scene, const std::filesystem::path& out, const std::string& extra) {
+    return run_cli("render --model '" + (dir / "m.ply").string() + "' -s '" + scene.string() + "' -r 8 -o '" +
+                   out.string() + "' " + extra);
+  };
+  ASSERT_EQ(render(fern, dir / "out", "").exit_code, 0);
+  const std::string first = read_file(dir / "out/image008.png");
+  const auto again = render(fern, dir / "out", "");
+  EXPECT_EQ(again.exit_code, 1) << again.output;
+  EXPECT_NE(again.output.find((dir / "out/image000.png").string() + ": exists"), std::string::npos) << again.output;
+  // --alpha's files are new, but the RGB ones are not: still refused, and nothing was written.
+  EXPECT_EQ(render(fern, dir / "out", "--alpha").exit_code, 1);
+  EXPECT_FALSE(std::filesystem::exists(dir / "out/image000_alpha.png"));
+  EXPECT_EQ(read_file(dir / "out/image008.png"), first);
+  const auto own = render(fern, fern / "images_8", "");
+  EXPECT_EQ(own.exit_code, 1) << own.output;
+  EXPECT_NE(own.output.find("is one of the scene's image folders"), std::string::npos) << own.output;
+  const auto both = render(lego, dir / "lego", "--split all");
+  EXPECT_EQ(both.exit_code, 1) << both.output;
+  EXPECT_NE(both.output.find("would both be written to " + (dir / "lego/r_0.png").string()), std::string::npos)
+      << both.output;
+  EXPECT_FALSE(std::filesystem::exists(dir / "lego"));
 }
 
 }  // namespace
