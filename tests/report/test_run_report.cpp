@@ -164,6 +164,19 @@ TEST(ReportCli, WritesTheReportAndRejectsAFolderThatIsNoRun) {
   const auto r = test::run_cli("report -m '" + (dir / "run").string() + "' -o '" + (dir / "out.html").string() + "'");
   ASSERT_EQ(r.exit_code, 0) << r.output;
   EXPECT_NE(read_file(dir / "out.html").find("<section id=\"views\">"), std::string::npos);
+  // Run again: its own page is replaced. Anything else given as -o is not (the run's config.json, a user's file).
+  const auto again = test::run_cli("report -m '" + (dir / "run").string() + "' -o '" + (dir / "out.html").string() + "'");
+  EXPECT_EQ(again.exit_code, 0) << again.output;
+  const std::string config = read_file(dir / "run/config.json");
+  for (const fs::path& victim : {dir / "run/config.json", dir / "notes.html"}) {
+    if (!fs::exists(victim)) std::ofstream(victim) << "<html>my notes</html>";
+    const std::string before = read_file(victim);
+    const auto r2 = test::run_cli("report -m '" + (dir / "run").string() + "' -o '" + victim.string() + "'");
+    EXPECT_EQ(r2.exit_code, 1) << r2.output;
+    EXPECT_NE(r2.output.find(victim.string() + ": exists and is not a d2gs report"), std::string::npos) << r2.output;
+    EXPECT_EQ(read_file(victim), before);
+  }
+  EXPECT_EQ(read_file(dir / "run/config.json"), config);
   const auto bad = test::run_cli("report -m '" + (dir / "nothing").string() + "'");
   EXPECT_EQ(bad.exit_code, 1);
   EXPECT_NE(bad.output.find("d2gs: error: "), std::string::npos) << bad.output;

@@ -1,6 +1,8 @@
 #include "d2gs/report/run_report.hpp"
 
+#include <algorithm>
 #include <cmath>
+#include <fstream>
 
 #include <fmt/format.h>
 
@@ -229,8 +231,20 @@ std::string run_report_html(const RunData& run) {
 }
 
 fs::path write_run_report(const fs::path& run_dir, const fs::path& out) {
-  const RunData run = load_run(run_dir);
   const fs::path path = out.empty() ? run_dir / "report.html" : out;
+  check_output_file(path);
+  // Only an earlier report is replaced (html.cpp's pages name d2gs as their generator in the head): never
+  // a run's config.json, its model or a user's file given as -o by mistake.
+  std::error_code ec;
+  if (fs::exists(path, ec)) {
+    std::string head(1024, '\0');
+    std::ifstream in(path, std::ios::binary);
+    in.read(head.data(), static_cast<std::streamsize>(head.size()));
+    head.resize(static_cast<std::size_t>(std::max<std::streamsize>(in.gcount(), 0)));
+    if (head.find("<meta name=\"generator\" content=\"d2gs\">") == std::string::npos)
+      fail_file(path, "exists and is not a d2gs report: report replaces only its own pages (choose another -o)");
+  }
+  const RunData run = load_run(run_dir);
   write_file_atomic(path, run_report_html(run));
   return path;
 }
