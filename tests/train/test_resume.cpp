@@ -164,9 +164,35 @@ TEST(Resume, RefusesAnotherSceneResolutionSplitOrConfigurationAndLeavesTheRunAlo
   const auto other_before = snapshot(dir / "other");
   auto into_other = small_run(dir / "other", 4);
   const std::string message = error_of([&] { Trainer t(into_other, ckpt); });
-  EXPECT_NE(message.find((dir / "other").string() + ": holds another run (method \"3dgs\", seed 2"), std::string::npos)
-      << message;
+  EXPECT_NE(message.find((dir / "other").string() + ": holds another run (scene \""), std::string::npos) << message;
+  EXPECT_NE(message.find("method \"3dgs\", seed 2"), std::string::npos) << message;
   EXPECT_EQ(changes(other_before, snapshot(dir / "other")), "");
+
+  // ... nor one of another scene with the same method, seed, resolution and split (the scene was not compared).
+  auto room_run = small_run(dir / "room", 2);
+  room_run.source = (test::shared_data() / "llff_nex_reprocessed/room").string();
+  room_run.n_views = 0;
+  room_run.train_views = {1, 10, 19};
+  room_run.test_views = {0, 8, 16};
+  Trainer(room_run).run();
+  const auto room_before = snapshot(dir / "room");
+  auto into_room = small_run(dir / "room", 4);
+  const std::string room_message = error_of([&] { Trainer t(into_room, ckpt); });
+  EXPECT_NE(room_message.find((dir / "room").string() + ": holds another run (scene \""), std::string::npos) << room_message;
+  EXPECT_EQ(changes(room_before, snapshot(dir / "room")), "");
+
+  // ... nor a folder of another program's files; a new folder holding only the copied checkpoint is fine.
+  fs::create_directories(dir / "mine");
+  write_file_atomic(dir / "mine/cameras.json", "[1, 2, 3]");
+  const std::string mine_message = error_of([&] { Trainer t(small_run(dir / "mine", 4), ckpt); });
+  EXPECT_NE(mine_message.find((dir / "mine").string() + ": is not empty and holds no d2gs run (cameras.json is there)"),
+            std::string::npos)
+      << mine_message;
+  EXPECT_EQ(read_file(dir / "mine/cameras.json"), "[1, 2, 3]");
+  fs::create_directories(dir / "copy");
+  fs::copy_file(ckpt, dir / "copy/chkpnt2.bin");
+  Trainer copied(small_run(dir / "copy", 4), dir / "copy/chkpnt2.bin");
+  EXPECT_EQ(copied.iteration(), 2);
 }
 
 // The usual way to continue a run by hand: its own config.json, where "stereo" is recorded as the folder it
@@ -321,6 +347,13 @@ TEST(Resume, RunInterruptedBeforeItsFirstCheckpointStartsAgain) {
                         (dir / "ckpt").string(), (dir / "ckpt/chkpnt2.bin").string()));
   EXPECT_EQ(error_of([&] { Trainer t(small_run(run, 3)); }),
             run.string() + ": already holds a finished training run (use a new folder)");
+  // A config.json of another program is no interrupted run: the folder is not written into.
+  fs::create_directories(dir / "project");
+  write_file_atomic(dir / "project/config.json", R"({"name": "my project", "version": 3})");
+  write_file_atomic(dir / "project/notes.txt", "mine");
+  EXPECT_EQ(error_of([&] { Trainer t(small_run(dir / "project", 3)); }),
+            (dir / "project").string() + ": is not empty and holds no d2gs run; refusing to write into it");
+  EXPECT_EQ(read_file(dir / "project/config.json"), R"({"name": "my project", "version": 3})");
 }
 
 // Weak: flipped bytes in a checkpoint were found only if a value went non-finite.

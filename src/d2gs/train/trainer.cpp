@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <fstream>
 #include <optional>
+#include <regex>
 #include <set>
 
 #include <nlohmann/json.hpp>
@@ -113,6 +114,20 @@ namespace {
 // The lock file of a model folder: one `d2gs train` at a time, released by the kernel when it ends.
 constexpr const char* kLockFile = ".d2gs-train.lock";
 
+// Whether `file` is the config.json of a d2gs run (an object naming the method, scene and split), not a
+// file of that name some other program left.
+bool records_a_d2gs_run(const fs::path& file) {
+  std::error_code ec;
+  if (!fs::is_regular_file(file, ec)) return false;
+  try {
+    const nlohmann::json j = nlohmann::json::parse(read_file(file));
+    return j.is_object() && j.contains("method") && j["method"].is_string() && j.contains("source") &&
+           j["source"].is_string() && j.contains("split") && j["split"].is_object();
+  } catch (const std::exception&) {
+    return false;
+  }
+}
+
 // A fresh start in `dir` (already locked): refuse to overwrite a run that saved a model or a checkpoint, or
 // a folder d2gs did not make; start again where a run was interrupted before it saved either.
 void check_fresh_start(const fs::path& dir, bool started_before) {
@@ -128,7 +143,7 @@ void check_fresh_start(const fs::path& dir, bool started_before) {
               checkpoints.front().second.string());
   if (fs::exists(dir / "point_cloud", ec) || fs::exists(dir / "test", ec))
     fail_file(dir, "already holds a training run (use a new folder, or --resume CHECKPOINT)");
-  if (started_before || fs::exists(dir / "config.json", ec)) {
+  if (started_before || records_a_d2gs_run(dir / "config.json")) {
     if (started_before || fs::exists(dir / "train_log.jsonl", ec))
       spdlog::warn("{}: starting the run again: the previous one was interrupted before it saved a model or a checkpoint",
                    dir.string());
@@ -138,22 +153,35 @@ void check_fresh_start(const fs::path& dir, bool started_before) {
 }
 
 // Resuming into `dir` (already locked): a run already there must be the one being resumed.
+// A folder without a run's config.json may be resumed into when it holds nothing else than checkpoints
+// (one copied there to continue from); anything else is another program's.
 void check_resumed_run_in_folder(const fs::path& dir, const TrainConfig& cfg, const Split& split) {
   const fs::path file = dir / "config.json";
   std::error_code ec;
-  if (!fs::is_regular_file(file, ec)) return;
+  if (!fs::is_regular_file(file, ec)) {
+    static const std::regex checkpoint_name(R"(chkpnt[0-9]+\.bin)");
+    for (const auto& e : fs::directory_iterator(dir, ec)) {
+      const std::string name = e.path().filename().string();
+      if (name != kLockFile && !(e.is_regular_file(ec) && std::regex_match(name, checkpoint_name)))
+        fail_file(dir, "is not empty and holds no d2gs run ({} is there); refusing to write into it", name);
+    }
+    return;
+  }
   nlohmann::json j;
   try {
     j = nlohmann::json::parse(read_file(file));
-    if (j.at("method") == cfg.method && j.at("seed") == cfg.seed && j.at("resolution") == cfg.resolution &&
+    const bool same_scene = j.at("source").is_string() &&
+                            absolute_path(recorded_source(dir, j["source"].get<std::string>()).string()) ==
+                                absolute_path(cfg.source);
+    if (same_scene && j.at("method") == cfg.method && j.at("seed") == cfg.seed && j.at("resolution") == cfg.resolution &&
         j.at("split").at("train") == split.train && j.at("split").at("test") == split.test)
       return;
   } catch (const nlohmann::json::exception&) {
     fail_file(file, "cannot tell whether the folder holds the run being resumed (not a d2gs config.json)");
   }
-  fail_file(dir, "holds another run (method {}, seed {}, -r {}, training views {}); resume into the checkpoint's run "
-                 "folder or a new one", j["method"].dump(), j["seed"].dump(), j["resolution"].dump(),
-            j["split"]["train"].dump());
+  fail_file(dir, "holds another run (scene {}, method {}, seed {}, -r {}, training views {}); resume into the "
+                 "checkpoint's run folder or a new one", j["source"].dump(), j["method"].dump(), j["seed"].dump(),
+            j["resolution"].dump(), j["split"]["train"].dump());
 }
 
 // Creates and locks the model folder, removes what killed writers left there, and checks what it holds.
