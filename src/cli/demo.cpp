@@ -74,6 +74,9 @@ PointCloud training_view_points(const std::filesystem::path& dir, const std::vec
   return cloud;
 }
 
+// The file by which a demo marks OUTPUT/run as its own, to be replaced by the next demo there.
+constexpr const char* kDemoRunMarker = ".d2gs-demo-run";
+
 std::string quoted(const std::string& s) {
   return s.find_first_of(" \t'\"\\$`") == std::string::npos ? s : "'" + s + "'";
 }
@@ -85,6 +88,17 @@ int run_demo(const DemoOptions& opt) {
   validate(scene);
   const std::filesystem::path dir = opt.output;
   check_output_folder(dir);
+  // OUTPUT/run is replaced only when an earlier demo marked it as its own, checked before any work.
+  const std::filesystem::path run_dir = dir / "run";
+  std::error_code ec;
+  bool replace_run = false;
+  if (!opt.scene_only && std::filesystem::exists(run_dir, ec)) {
+    if (!std::filesystem::is_directory(run_dir, ec)) fail_file(run_dir, "exists and is not a folder (the demo trains its run there)");
+    replace_run = std::filesystem::is_regular_file(run_dir / kDemoRunMarker, ec);
+    if (!replace_run && !std::filesystem::is_empty(run_dir, ec))
+      fail_file(run_dir, "holds files the demo did not write (a run of yours, or one of a demo before {} marked its own): "
+                "move it away or choose another -o", kDemoRunMarker);
+  }
   if (!opt.scene_only) {
     // The training split of the scene to be written, checked before any view is rendered.
     Scene planned;
@@ -126,9 +140,7 @@ int run_demo(const DemoOptions& opt) {
 
   // A short D²GS schedule on the sparse split: densification from iteration 100 (not 500) so that it
   // happens within the budget; everything else is the method's default.
-  const std::filesystem::path run_dir = dir / "run";
-  std::error_code ec;
-  if (std::filesystem::exists(run_dir / "config.json", ec)) std::filesystem::remove_all(run_dir, ec);  // an earlier demo's
+  if (replace_run) std::filesystem::remove_all(run_dir);  // an earlier demo's (checked above)
   TrainConfig c;
   c.source = std::filesystem::absolute(dir).lexically_normal().string();  // recorded absolute, as d2gs train does
   c.model_dir = run_dir.string();
@@ -160,6 +172,7 @@ int run_demo(const DemoOptions& opt) {
     std::fprintf(stderr, "demo: training D²GS on %d views at 1/%d resolution for %d iterations (init: %s) in %s\n",
                  c.n_views, c.resolution, c.iterations, c.init.c_str(), run_dir.string().c_str());
   Trainer trainer(c);
+  write_file_atomic(run_dir / kDemoRunMarker, "written by d2gs demo: the next demo in this folder replaces this run\n");
   const EvalSummary before = trainer.evaluate_test_views();
   trainer.run();
   const EvalSummary after = trainer.evaluate_test_views();

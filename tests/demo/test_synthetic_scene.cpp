@@ -573,5 +573,32 @@ TEST(DemoCli, ImpossibleSplitFailsBeforeTheSceneIsWritten) {
   EXPECT_EQ(only.exit_code, 0) << only.output;
 }
 
+// OUTPUT/run is the demo's to replace only when a demo marked it so: a run of the user's there was deleted.
+TEST(DemoCli, ReplacesOnlyARunAnEarlierDemoWrote) {
+  const auto dir = test::scratch_dir() / "scene";
+  ASSERT_EQ(test::run_cli(fmt::format("-q demo -o '{}' --views 9 --scene-only", dir.string())).exit_code, 0);
+  const std::string scene_json = read_file(dir / "scene.json");
+  fs::create_directories(dir / "run");
+  write_file_atomic(dir / "run/config.json", R"({"method": "dropgaussian"})");
+  write_file_atomic(dir / "run/NOTES.txt", "mine");
+  const auto r = test::run_cli(fmt::format("demo -o '{}' --views 9 -r 8 --iterations 2 --init random", dir.string()));
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find((dir / "run").string() + ": holds files the demo did not write"), std::string::npos) << r.output;
+  EXPECT_EQ(read_file(dir / "run/NOTES.txt"), "mine");
+  EXPECT_EQ(read_file(dir / "scene.json"), scene_json);
+  fs::remove_all(dir / "run");
+  write_file_atomic(dir / "run", "a file");
+  const auto file = test::run_cli(fmt::format("demo -o '{}' --views 9 -r 8 --iterations 2 --init random", dir.string()));
+  EXPECT_EQ(file.exit_code, 1) << file.output;
+  EXPECT_NE(file.output.find("exists and is not a folder"), std::string::npos) << file.output;
+  fs::remove(dir / "run");
+  // The demo's own run is replaced by the next demo.
+  for (int k = 0; k < 2; ++k) {
+    const auto ok = test::run_cli(fmt::format("-q demo -o '{}' --views 9 -r 8 --iterations 2 --init random", dir.string()));
+    ASSERT_EQ(ok.exit_code, 0) << ok.output;
+    EXPECT_TRUE(fs::exists(dir / "run/.d2gs-demo-run"));
+  }
+}
+
 }  // namespace
 }  // namespace d2gs
