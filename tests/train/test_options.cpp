@@ -110,7 +110,10 @@ TEST(TrainCli, RangeErrorsNameFlagsThatExist) {
            {"--opacity-decay-factor 0", "option --opacity-decay-factor must be in (0, 1] (got 0)"},
            {"--init-color-filter 1.5", "option --init-color-filter must be in [0, 1] (got 1.5)"},
            {"--init-pm-distinctiveness 3", "option --init-pm-distinctiveness must be in [0, 2] (got 3)"},
-           {"--init-pm-uniqueness -0.5", "option --init-pm-uniqueness must be in [0, 2] (got -0.5)"}}) {
+           {"--init-pm-uniqueness -0.5", "option --init-pm-uniqueness must be in [0, 2] (got -0.5)"},
+           {"--random-points 2000000000", "option --random-points must be in [1, 10000000] (got 2000000000)"},
+           {"--opacity-lr nan", "option --opacity-lr: 'nan' is not a finite number"},
+           {"--opacity-lr -inf", "option --opacity-lr: '-inf' is not a finite number"}}) {
     const auto r = test::run_cli(fmt::format("train -s '{}' -m '{}' {}", fern, (dir / "run").string(), args));
     EXPECT_EQ(r.exit_code, 1) << args << "\n" << r.output;
     EXPECT_NE(r.output.find("d2gs: error: " + expected), std::string::npos) << args << "\n" << r.output;
