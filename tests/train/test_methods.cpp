@@ -219,6 +219,17 @@ TEST(Methods, ViewMapsAreReadAtTheViewsSizeAndErrorsNameTheFile) {
   write_npy_f32(dir / "view.npy", {8}, {1, 0, 3, 3, 1, 0, 3, 3});
   EXPECT_EQ(test::error_of([&] { read_view_map(dir, cam, {.what = "stereo depth", .shape = "depth map"}); }),
             file + ": expected an H×W depth map, got 1 dimensions");
+  // Maps that would leave nothing to act on, silently: non-finite values, no value at all, another shape.
+  write_npy_f32(dir / "view.npy", {2, 4}, {1, 0, 3, std::nanf(""), 1, 0, 3, 3});
+  EXPECT_EQ(test::error_of([&] { read_view_map(dir, full, {.what = "prior", .shape = "map"}); }),
+            file + ": value nan at pixel 3 is not a finite number");
+  write_npy_f32(dir / "view.npy", {2, 4}, {0, 0, -1, 0, 0, 0, -2, 0});
+  EXPECT_EQ(test::error_of([&] { read_view_map(dir, full, {.what = "prior", .shape = "map", .zero_is_none = true}); }),
+            file + ": holds no value for training view view.png (every pixel is 0, which means none, or below)");
+  EXPECT_EQ(read_view_map(dir, full, {.what = "prior", .shape = "map"}).pixels[2], -1.0f);  // a disparity may be < 0
+  write_npy_f32(dir / "view.npy", {4, 4}, std::vector<float>(16, 2.0f));
+  EXPECT_EQ(test::error_of([&] { read_view_map(dir, full, {.what = "prior", .shape = "map"}); }),
+            file + ": is 4×4, training view view.png is 4×2: another aspect ratio, so not this view's map");
   cam.image_name = "other.jpg";
   EXPECT_EQ(test::error_of([&] { read_view_map(dir, cam, {.what = "DAFE prior", .shape = "map"}); }),
             (dir / "other.npy").string() + ": DAFE prior missing for training view other.jpg");
