@@ -38,6 +38,22 @@ int main(int argc, char** argv) {
   add(d2gs::cli::add_report_command);
   add(d2gs::cli::add_experiment_command);
 
+  // The first word that is no option names the command: say which words would have been one.
+  for (int i = 1; i < argc; ++i) {
+    const std::string word = argv[i];
+    if (word.empty() || word[0] == '-') continue;
+    std::string known;
+    bool found = false;
+    for (const auto& [sub, run] : runs) {
+      known += (known.empty() ? "" : ", ") + sub->get_name();
+      found = found || sub->get_name() == word;
+    }
+    if (!found) {
+      std::fprintf(stderr, "d2gs: error: unknown command '%s' (commands: %s; d2gs --help)\n", word.c_str(), known.c_str());
+      return 2;
+    }
+    break;
+  }
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -164,5 +164,14 @@ TEST(TrainCli, HelpListsEveryOptionOnceWithItsRange) {
   }
 }
 
+// A word that names no command: said so, with the commands there are (CLI11 said "A subcommand is required").
+TEST(Cli, UnknownCommandIsNamed) {
+  const auto r = test::run_cli("trian -s x");
+  EXPECT_EQ(r.exit_code, 2) << r.output;
+  EXPECT_NE(r.output.find("d2gs: error: unknown command 'trian' (commands: "), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("train"), std::string::npos) << r.output;
+  EXPECT_EQ(test::run_cli("-q --version").exit_code, 0);
+}
+
 }  // namespace
 }  // namespace d2gs

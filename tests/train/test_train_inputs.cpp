@@ -172,6 +172,7 @@ TEST(TrainCli, EvalFindsTheSceneFromAnotherWorkingFolder) {
   const auto r = test::run_cli("-q train -s fern -m run -r 8 --n-views 3 --init random --random-points 300 --iterations 2");
   fs::current_path(before);
   ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_EQ(r.output.find("[train "), std::string::npos) << "d2gs -q prints no progress line: " << r.output;
   const fs::path run = dir / "work/run";
   auto config = nlohmann::json::parse(read_file(run / "config.json"));
   EXPECT_EQ(config["source"], (dir / "work/fern").string());

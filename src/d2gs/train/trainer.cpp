@@ -711,7 +711,9 @@ void Trainer::run() {
   const auto& cfg = s.cfg;
   const std::set<int> checkpoints(cfg.checkpoint_iterations.begin(), cfg.checkpoint_iterations.end());
   const int start = s.iteration;
-  TrainingProgress progress(cfg.method, start, cfg.iterations, cfg.quiet);
+  // d2gs -q (errors only) silences the progress line as train --quiet does.
+  TrainingProgress progress(cfg.method, start, cfg.iterations,
+                            cfg.quiet || !spdlog::default_logger()->should_log(spdlog::level::info));
   s.outputs = true;  // saves and test metrics, from step()
   profile::reset();
   // --stop-at: the same schedule, cut after that iteration (a checkpoint there, so that --resume continues).
