@@ -159,6 +159,7 @@ Run add_eval_command(CLI::App& app) {
         fail("key 'init_is_oracle' must be true or false");
       oracle = cj.value("init_is_oracle", false);
       take_recorded_run_config(c, cj);  // an older run without image_source was trained on images_R/
+      check_resolution(c.resolution);     // the scene is loaded at it below
     } catch (const Error& e) {
       fail_file(cfg_path, "{}", e.what());
     }

@@ -159,6 +159,15 @@ TEST(TrainCli, TruncatedTrainingJpegIsAnErrorNamingIt) {
   EXPECT_NE(r.output.find("d2gs: error: " + image.string() + ": corrupt or truncated JPEG"), std::string::npos)
       << r.output;
   EXPECT_FALSE(fs::exists(dir / "run/point_cloud"));
+  // The folder this failed run created is not left behind (it held only the lock file).
+  EXPECT_FALSE(fs::exists(dir / "run"));
+  // An existing empty folder stays, without the lock file, so a rerun is no "interrupted run".
+  fs::create_directories(dir / "mine");
+  const auto again = test::run_cli(fmt::format("-q train -s '{}' -m '{}' -r 8 --n-views 3 --init random --random-points "
+                                               "200 --iterations 1", room.string(), (dir / "mine").string()));
+  EXPECT_EQ(again.exit_code, 1) << again.output;
+  EXPECT_TRUE(fs::is_directory(dir / "mine"));
+  EXPECT_TRUE(fs::is_empty(dir / "mine"));
 }
 
 // config.json records the scene absolute; eval finds it from any working folder, resolves a relative

@@ -533,6 +533,12 @@ TEST(Trainer, RunFolderServesEvalAndImrCommands) {
   const auto no_views = test::run_cli(fmt::format("eval -m '{}'", run.string()));
   EXPECT_EQ(no_views.exit_code, 1) << no_views.output;
   EXPECT_NE(no_views.output.find("config.json: records no test views"), std::string::npos) << no_views.output;
+  auto odd_resolution = nlohmann::json::parse(config);
+  odd_resolution["resolution"] = 3;
+  write_file_atomic(run / "config.json", odd_resolution.dump());
+  const auto three = test::run_cli(fmt::format("eval -m '{}'", run.string()));
+  EXPECT_EQ(three.exit_code, 1) << three.output;
+  EXPECT_NE(three.output.find((run / "config.json").string() + ": resolution"), std::string::npos) << three.output;
   write_file_atomic(run / "config.json", config);
   EXPECT_EQ(read_file(run / "results.json"), scored);
   // --iteration counts from 1; a folder whose number no int holds is not a saved iteration.

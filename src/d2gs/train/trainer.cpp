@@ -265,7 +265,24 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
       fail_file(resume_from, "cannot resume: {}", e.what());
     }
   }
+  const bool new_folder = !fs::exists(s.out(), ec), new_lock = !fs::exists(s.out() / kLockFile, ec);
   s.folder_lock = lock_model_dir(s.out(), resuming);
+  // When a later step of the set-up fails (a corrupt image, a bad --init, another run in the folder) a lock
+  // file made here goes, and a folder made here goes too when it holds nothing else: neither is left behind,
+  // nor taken for an interrupted run; a folder that was there keeps what it held.
+  struct RemoveIfLeftEmpty {
+    State& s;
+    bool new_folder, new_lock;
+    bool armed = true;
+    ~RemoveIfLeftEmpty() {
+      if (!armed) return;
+      const fs::path lock = s.folder_lock->path();
+      s.folder_lock.reset();
+      std::error_code ignored;
+      if (new_lock) fs::remove(lock, ignored);
+      if (new_folder) fs::remove(s.out(), ignored);  // only when empty
+    }
+  } remove_if_left_empty{s, new_folder, new_lock};
   if (resuming) check_resumed_run_in_folder(s.out(), s.cfg, s.split);
   for (int v : s.split.train) {
     s.train_images.push_back(load_image(s.scene, v));
@@ -345,6 +362,7 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
   s.log.open(s.out() / "train_log.jsonl", s.iteration > 0 ? std::ios::app : std::ios::trunc);
   if (!s.log) fail_file(s.out() / "train_log.jsonl", "cannot open for writing");
   s.started = Clock::now();
+  remove_if_left_empty.armed = false;
 }
 
 Trainer::~Trainer() = default;
