@@ -16,6 +16,7 @@
 
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
+#include "d2gs/core/image.hpp"
 #include "d2gs/train/trainer.hpp"
 #include "test_paths.hpp"
 
@@ -193,6 +194,35 @@ TEST(Resume, RefusesAnotherSceneResolutionSplitOrConfigurationAndLeavesTheRunAlo
   fs::copy_file(ckpt, dir / "copy/chkpnt2.bin");
   Trainer copied(small_run(dir / "copy", 4), dir / "copy/chkpnt2.bin");
   EXPECT_EQ(copied.iteration(), 2);
+}
+
+// A training image whose file changed under the same name and size (re-exported, edited) is not the image
+// the checkpoint was trained on: resuming would silently continue on other pixels.
+TEST(Resume, RefusesATrainingImageThatChangedUnderItsName) {
+  const auto dir = test::scratch_dir();
+  const fs::path scene = dir / "fern";
+  fs::create_directories(scene);
+  fs::create_symlink(fs::path(fern()) / "poses_bounds.npy", scene / "poses_bounds.npy");
+  fs::create_directory_symlink(fs::path(fern()) / "sparse", scene / "sparse");
+  for (const char* folder : {"images_4", "images_8"}) {
+    fs::create_directories(scene / folder);
+    for (const auto& e : fs::directory_iterator(fs::path(fern()) / folder))
+      fs::create_symlink(e.path(), scene / folder / e.path().filename());
+  }
+  auto cfg = small_run(dir / "run", 4);
+  cfg.source = scene.string();
+  cfg.checkpoint_iterations = {2};
+  Trainer(cfg).run();
+  // Training view 10 (of 1, 10, 19), the file its image is decoded from: one pixel changed, same size.
+  const fs::path file = scene / "images_4/image010.png";
+  Image image = read_image(file);
+  image.at(5, 5, 0) = 1.0f - image.at(5, 5, 0);
+  fs::remove(file);
+  write_image(file, image);
+  const std::string message = error_of([&] { Trainer t(cfg, dir / "run/chkpnt2.bin"); });
+  EXPECT_EQ(message.rfind((dir / "run/chkpnt2.bin").string() + ": cannot resume: training view 10 (image010.png) has "
+                          "another image file than it was trained on (CRC-32 ", 0), 0u)
+      << message;
 }
 
 // The usual way to continue a run by hand: its own config.json, where "stereo" is recorded as the folder it

@@ -67,6 +67,7 @@ json run_to_json(const RunIdentity& r) {
   j["split"] = {{"train", r.train_views}, {"test", r.test_views}};
   j["train_images"] = r.train_images;
   j["train_sizes"] = std::move(sizes);
+  j["train_image_crcs"] = r.train_image_crcs;
   j["options"] = r.options;
   return j;
 }
@@ -85,6 +86,11 @@ RunIdentity run_from_json(const json& j) {
     const auto wh = integers<int>(size);
     if (wh.size() != 2 || wh[0] < 0 || wh[1] < 0) throw std::invalid_argument("an image size is not a width and a height");
     r.train_sizes.push_back({wh[0], wh[1]});
+  }
+  if (j.contains("train_image_crcs")) {
+    r.train_image_crcs = integers<std::uint32_t>(j["train_image_crcs"]);
+    if (!r.train_image_crcs.empty() && r.train_image_crcs.size() != r.train_views.size())  // empty: not recorded
+      throw std::invalid_argument("the training views and their images' checksums differ in number");
   }
   r.options = j.at("options");
   if (!r.options.is_object()) throw std::invalid_argument("options is not an object");
@@ -185,6 +191,7 @@ RunIdentity run_identity(const Scene& scene, const Split& split, const TrainConf
     const Camera& c = scene.cameras.at(static_cast<std::size_t>(v));
     r.train_images.push_back(c.image_name);
     r.train_sizes.push_back({c.width, c.height});
+    r.train_image_crcs.push_back(crc32(read_file(c.image_path)));
   }
   r.options = identity_options(config);  // the options that change the training, paths made absolute
   return r;
@@ -435,6 +442,10 @@ std::string check_resume(const fs::path& source, const Checkpoint& checkpoint, c
     if (was.train_sizes[k] != run.train_sizes[k])
       refuse("training view {} ({}) was {}×{}, it is {}×{} now", was.train_views[k], run.train_images[k],
              was.train_sizes[k][0], was.train_sizes[k][1], run.train_sizes[k][0], run.train_sizes[k][1]);
+    if (!was.train_image_crcs.empty() && k < run.train_image_crcs.size() &&
+        was.train_image_crcs[k] != run.train_image_crcs[k])
+      refuse("training view {} ({}) has another image file than it was trained on (CRC-32 {:08x}, now {:08x})",
+             was.train_views[k], run.train_images[k], was.train_image_crcs[k], run.train_image_crcs[k]);
   }
   if (was.test_views != run.test_views)
     refuse("its test views were {}, this run's are {}", join(was.test_views), join(run.test_views));

@@ -37,6 +37,10 @@ struct RunIdentity {
   std::vector<int> train_views, test_views;   // the split (global indices)
   std::vector<std::string> train_images;      // image names of the training views, in split order
   std::vector<std::array<int, 2>> train_sizes;  // width, height of each training view at -r
+  // CRC-32 of each training view's image file (the one decoded for it), in split order: an image whose
+  // pixels changed under the same name and size is not the one trained on. Empty in checkpoints written
+  // before it was recorded (2026-12-02), which are then not checked for it.
+  std::vector<std::uint32_t> train_image_crcs;
   // Every option that changes the training (config.json keys; OptionRole::Training in options.hpp), paths
   // made absolute. Left out: those resolved above (source, resolution, n_views, train_views, test_views),
   // --iterations (checked on its own) and the output-only ones (model_path, save/checkpoint/test
