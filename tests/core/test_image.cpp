@@ -99,6 +99,31 @@ TEST(Image, CorruptAndMissingFilesAreErrors) {
   }
 }
 
+// A truncated or damaged PNG is named by d2gs from its chunk structure before libpng sees it (libpng printed
+// its own "libpng error: ..." line on stderr before d2gs's message).
+TEST(Image, TruncatedOrDamagedPngIsNamedWithoutLibpngsOwnLine) {
+  const std::string png = read_file(test::shared_data() / "nerf_llff_data/fern/images_8/image000.png");
+  ASSERT_NO_THROW(decode_image(png, "whole.png"));
+  const auto message = [](const std::string& bytes) {
+    testing::internal::CaptureStderr();
+    std::string what;
+    try {
+      decode_image(bytes, "x.png");
+    } catch (const Error& e) {
+      what = e.what();
+    }
+    const std::string err = testing::internal::GetCapturedStderr();
+    EXPECT_EQ(err, "") << "libpng spoke: " << err;
+    return what;
+  };
+  EXPECT_EQ(message(png.substr(0, png.size() * 2 / 3)), "x.png: corrupt or truncated PNG (truncated: the file ends inside chunk IDAT)");
+  EXPECT_EQ(message(png.substr(0, png.size() - 12)), "x.png: corrupt or truncated PNG (truncated: no IEND chunk)");
+  std::string flipped = png;
+  flipped[png.size() / 2] = static_cast<char>(flipped[png.size() / 2] ^ 0x10);
+  EXPECT_EQ(message(flipped), "x.png: corrupt or truncated PNG (chunk IDAT is damaged (CRC mismatch))");
+  EXPECT_EQ(message(png.substr(0, 8) + std::string(16, 'x')).rfind("x.png: corrupt or truncated PNG (", 0), 0u);
+}
+
 // The fuzzer's finding: bytes that are neither PNG nor JPEG but carry DICOM's magic at byte 128 made OpenCV
 // hand them to GDCM, which aborted the process. Only PNG and JPEG are decoded; anything else is a one-line
 // error naming the file, whatever decoder OpenCV would have chosen.

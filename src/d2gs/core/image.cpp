@@ -19,6 +19,7 @@
 #include <opencv2/imgproc.hpp>
 
 #include "d2gs/core/atomic_file.hpp"
+#include "d2gs/core/checksum.hpp"
 #include "d2gs/core/error.hpp"
 
 namespace d2gs {
@@ -61,6 +62,29 @@ std::uint32_t be32(const unsigned char* p) {
 bool is_png(std::string_view bytes) {
   static constexpr char magic[8] = {'\x89', 'P', 'N', 'G', '\r', '\n', '\x1a', '\n'};
   return bytes.starts_with(std::string_view(magic, sizeof magic));
+}
+
+// A PNG's chunk structure (length, type, data, CRC-32 of type and data), walked to IEND before libpng sees
+// the file: libpng reports a truncated or damaged chunk on stderr by itself, then OpenCV says only that it
+// could not decode. "" when the structure is whole; the deflate stream inside IDAT is libpng's to check.
+std::string png_problem(std::string_view bytes) {
+  const auto* p = reinterpret_cast<const unsigned char*>(bytes.data());
+  std::size_t at = 8;
+  bool first = true;
+  while (true) {
+    if (bytes.size() - at < 12)
+      return at == bytes.size() ? "truncated: no IEND chunk" : "truncated: the file ends inside a chunk header";
+    const std::uint32_t length = be32(p + at);
+    const std::string type(bytes.substr(at + 4, 4));
+    if (length > 0x7FFFFFFFu) return "chunk " + type + " has an impossible length";
+    if (first && type != "IHDR") return "the first chunk is not IHDR";
+    first = false;
+    if (bytes.size() - at - 12 < length) return "truncated: the file ends inside chunk " + type;
+    const std::uint32_t stored = be32(p + at + 8 + length);
+    if (crc32(bytes.substr(at + 4, 4 + length)) != stored) return "chunk " + type + " is damaged (CRC mismatch)";
+    at += 12 + length;
+    if (type == "IEND") return "";
+  }
 }
 
 bool is_jpeg(std::string_view bytes) {
@@ -182,6 +206,8 @@ Image decode_image(std::string_view bytes, const fs::path& source) {
   if (jpeg) {
     const std::string problem = jpeg_problem(bytes);
     if (!problem.empty()) fail_file(source, "corrupt or truncated JPEG ({})", problem);
+  } else if (const std::string problem = png_problem(bytes); !problem.empty()) {
+    fail_file(source, "corrupt or truncated PNG ({})", problem);
   }
   cv::Mat m;
   try {
