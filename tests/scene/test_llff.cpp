@@ -200,6 +200,16 @@ TEST(LlffBadInput, NanRowWrongShapeRowCountCorruptMagic) {
   bad_hwf[2 * 17 + 14] = -1;
   write_poses(npy, {20, 17}, bad_hwf);
   expect_error([&] { load_scene(root, res(8)); }, {npy.string(), "row 2", "focal"});
+  // Finite but impossible: a focal of 1e-300 pixels (the kNN of the random init met a non-finite point) or 1e-30, a
+  // camera at 1e300 or 1e30 (its depth range became inf … inf).
+  auto tiny_focal = raw.values;
+  tiny_focal[4 * 17 + 14] = 1e-30;  // the file is float32
+  write_poses(npy, {20, 17}, tiny_focal);
+  expect_error([&] { load_scene(root, res(8)); }, {npy.string(), "row 4", "no pinhole camera's"});
+  auto far_centre = raw.values;
+  far_centre[5 * 17 + 8] = 1e30;
+  write_poses(npy, {20, 17}, far_centre);
+  expect_error([&] { load_scene(root, res(8)); }, {npy.string(), "row 5", "camera centre", "beyond"});
 
   std::string bytes = read_file(test::fern_dir() / "poses_bounds.npy");
   bytes[1] = 'X';

@@ -74,6 +74,17 @@ std::vector<LlffPose> parse_llff_poses(const NpyArray& array, const fs::path& so
     if (p.height <= 0 || p.width <= 0 || p.focal <= 0)
       fail_file(source, "row {}: height, width and focal must be positive, found {}, {}, {}", k,
                 p.height, p.width, p.focal);
+    // Finite is not enough: later products of these (squared distances, f² in the projection's Jacobian)
+    // must stay finite too. A focal below 1 % of the image size is a field of view above 176°, no pinhole's;
+    // camera centres beyond 10⁹ units are no scene's (LLFF's poses are in the scene's own, bounded units).
+    const double size = std::max(p.width, p.height);
+    if (p.focal < 0.01 * size || p.focal > 1e6 * size)
+      fail_file(source, "row {}: focal {} for a {}×{} image is no pinhole camera's (expected {} to {} pixels)", k,
+                p.focal, p.width, p.height, 0.01 * size, 1e6 * size);
+    for (int i = 0; i < 3; ++i)
+      if (std::abs(p.center[i]) > 1e9)
+        fail_file(source, "row {}: camera centre ({}, {}, {}) is beyond 10⁹ units, no scene's", k, p.center.x,
+                  p.center.y, p.center.z);
     poses.push_back(p);
   }
   return poses;
