@@ -127,8 +127,9 @@ std::optional<RecordedScene> check_runs_share_a_scene(const std::vector<std::str
 
 // A PLY file, or a run folder's highest point_cloud/iteration_N/point_cloud.ply.
 std::filesystem::path resolve_model(const std::filesystem::path& input) {
-
   if (fs::is_regular_file(input)) return input;
+  std::error_code ec;
+  if (fs::exists(input, ec) && !fs::is_directory(input, ec)) require_regular_file(input);  // a pipe or device: said so
   if (!fs::is_directory(input)) fail_file(input, "no such model file or run folder");
   const fs::path clouds = input / "point_cloud";
   long best = -1;

@@ -1,4 +1,5 @@
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 
 #include <algorithm>
 #include <filesystem>
@@ -77,6 +78,31 @@ TEST(AtomicFile, OutputPathsAreCheckedBeforeAnythingIsWritten) {
   EXPECT_NE(file_is_dir.find("is a folder"), std::string::npos) << file_is_dir;
   EXPECT_NE(message([] { check_output_file(""); }), "");
   EXPECT_EQ(std::count(under.begin(), under.end(), '\n'), 0);
+}
+
+// Named pipes and devices are refused before they are opened: opening a pipe blocks until a writer comes
+// (every reader of d2gs hung on one), a device may never end.
+TEST(AtomicFile, ReadsOnlyRegularFiles) {
+  const auto dir = test::scratch_dir();
+  ASSERT_EQ(::mkfifo((dir / "pipe").c_str(), 0600), 0);
+  const auto message = [](const fs::path& p) {
+    try {
+      read_file(p);
+    } catch (const Error& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_EQ(message(dir / "pipe"), (dir / "pipe").string() + ": is a named pipe, expected a file");
+  EXPECT_EQ(message("/dev/null"), "/dev/null: is a device, expected a file");
+  EXPECT_EQ(message(dir), dir.string() + ": is a folder, expected a file");
+  EXPECT_EQ(message(dir / "none"), (dir / "none").string() + ": file not found");
+  fs::create_symlink(dir / "loop_b", dir / "loop_a");
+  fs::create_symlink(dir / "loop_a", dir / "loop_b");
+  EXPECT_EQ(message(dir / "loop_a").rfind((dir / "loop_a").string() + ": cannot be read: ", 0), 0u) << message(dir / "loop_a");
+  write_file_atomic(dir / "file", "x");
+  fs::create_symlink(dir / "file", dir / "link");
+  EXPECT_EQ(read_file(dir / "link"), "x");
 }
 
 }  // namespace

@@ -164,10 +164,25 @@ std::vector<fs::path> remove_stale_temporaries(const fs::path& dir) {
   return removed;
 }
 
-std::string read_file(const fs::path& path) {
+void require_regular_file(const fs::path& path) {
   std::error_code ec;
-  if (!fs::exists(path, ec)) fail_file(path, "file not found");
-  if (fs::is_directory(path, ec)) fail_file(path, "is a folder, expected a file");
+  const fs::file_status st = fs::status(path, ec);
+  switch (st.type()) {
+    case fs::file_type::regular: return;
+    case fs::file_type::directory: fail_file(path, "is a folder, expected a file");
+    case fs::file_type::fifo: fail_file(path, "is a named pipe, expected a file");
+    case fs::file_type::socket: fail_file(path, "is a socket, expected a file");
+    case fs::file_type::block:
+    case fs::file_type::character: fail_file(path, "is a device, expected a file");
+    case fs::file_type::not_found: fail_file(path, "file not found");
+    default:
+      if (ec) fail_file(path, "cannot be read: {}", ec.message());  // e.g. a loop of symbolic links
+      fail_file(path, "is not a regular file");
+  }
+}
+
+std::string read_file(const fs::path& path) {
+  require_regular_file(path);
   std::ifstream in(path, std::ios::binary | std::ios::ate);
   if (!in) fail_file(path, "cannot open: {}", std::strerror(errno));
   const std::streamoff size = in.tellg();

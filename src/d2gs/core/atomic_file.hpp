@@ -52,5 +52,8 @@ long atomic_temporary_writer(const std::string& filename);
 std::vector<std::filesystem::path> remove_stale_temporaries(const std::filesystem::path& dir);
 // Reads a whole file; throws d2gs::Error naming the file when it cannot be read.
 std::string read_file(const std::filesystem::path& path);
+// Throws d2gs::Error "<path>: ..." unless `path` is a regular file (or a link to one): missing, a folder,
+// or a named pipe, socket or device, which an open would block on or read without end.
+void require_regular_file(const std::filesystem::path& path);
 
 }  // namespace d2gs

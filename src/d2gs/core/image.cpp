@@ -2,6 +2,7 @@
 
 #include <csetjmp>
 #include <cstdio>
+#include <cstring>
 
 #include <algorithm>
 #include <cmath>
@@ -222,8 +223,11 @@ Image decode_image(std::string_view bytes, const fs::path& source) {
 }
 
 ImageSize read_image_size(const fs::path& path) {
+  std::error_code ec;
+  if (!fs::exists(path, ec)) fail_file(path, "image not found");
+  require_regular_file(path);  // a named pipe would block the open
   std::ifstream in(path, std::ios::binary);
-  if (!in) fail_file(path, "image not found");
+  if (!in) fail_file(path, "cannot open: {}", std::strerror(errno));
   ImageSize size{};
   unsigned char head[32] = {};
   in.read(reinterpret_cast<char*>(head), sizeof head);

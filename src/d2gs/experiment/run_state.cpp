@@ -37,6 +37,8 @@ std::string last_log_line(const fs::path& log) {
 // The last iteration line of train_log.jsonl (lines with "elapsed_s"; events and a line still being
 // written are passed over: report::read_train_log would refuse the whole file for that last line).
 void read_train_log(const fs::path& path, RunState& s) {
+  std::error_code ec;
+  if (!fs::is_regular_file(path, ec)) return;  // a named pipe would block the open
   std::ifstream in(path);
   std::string line;
   while (std::getline(in, line)) {
@@ -51,6 +53,11 @@ void read_train_log(const fs::path& path, RunState& s) {
 }
 
 void read_results(const fs::path& path, RunState& s) {
+  std::error_code ec;
+  if (!fs::is_regular_file(path, ec)) {
+    s.message = "results.json is not a regular file";
+    return;
+  }
   std::ifstream in(path);
   const auto j = nlohmann::json::parse(in, nullptr, false);  // discarded (not an object) when unreadable
   const report::Metrics mean = report::mean_metrics(j);

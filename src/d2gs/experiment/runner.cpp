@@ -63,6 +63,8 @@ namespace {
 
 // The last line of a log that reads like an error, else its last non-empty line.
 std::string last_error_line(const fs::path& log) {
+  std::error_code ec;
+  if (!fs::is_regular_file(log, ec)) return "";  // a named pipe would block the open
   std::ifstream in(log);
   std::string line, last, error;
   while (std::getline(in, line)) {

@@ -50,6 +50,7 @@ double log_number(const nlohmann::json& record, const char* key, const fs::path&
 }  // namespace
 
 TrainLog read_train_log(const fs::path& path) {
+  require_regular_file(path);
   std::ifstream in(path);
   if (!in) fail_file(path, "cannot be read");
   TrainLog log;

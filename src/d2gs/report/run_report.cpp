@@ -237,6 +237,7 @@ fs::path write_run_report(const fs::path& run_dir, const fs::path& out) {
   // a run's config.json, its model or a user's file given as -o by mistake.
   std::error_code ec;
   if (fs::exists(path, ec)) {
+    require_regular_file(path);  // a named pipe would block the read below
     std::string head(1024, '\0');
     std::ifstream in(path, std::ios::binary);
     in.read(head.data(), static_cast<std::streamsize>(head.size()));

@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/resize_pil.hpp"
 #include "d2gs/scene/blender.hpp"
@@ -31,6 +32,7 @@ std::string folder_name(int factor) { return factor == 1 ? std::string("images")
 
 // PNG colour types 4 (grey + alpha) and 6 (RGBA) carry an alpha channel; byte 25 of the file.
 bool png_has_alpha(const fs::path& path) {
+  require_regular_file(path);  // a named pipe would block the open
   std::ifstream in(path, std::ios::binary);
   unsigned char head[26] = {};
   in.read(reinterpret_cast<char*>(head), sizeof head);
