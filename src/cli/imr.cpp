@@ -184,14 +184,29 @@ int run_imr(const ImrCommandOptions& o) {
     fail("option --marginal-tolerance must be ≥ 0 (got {})", o.marginal_tolerance);
   if (o.max_iterations < 1) fail("option --max-iterations must be ≥ 1 (got {})", o.max_iterations);
   if (o.reference_camera < 0) fail("option --reference-camera must be ≥ 0 (got {})", o.reference_camera);
-  if (o.threads < 0) fail("option --threads must be ≥ 0 (got {})", o.threads);
+  // OpenMP is asked for this many threads as given: beyond a few thousand it cannot make them (a crash).
+  if (o.threads < 0 || o.threads > 1024) fail("option --threads must be in [0, 1024] (got {})", o.threads);
   if (o.anderson < 0 || o.anderson > 100) fail("option --anderson must be in [0, 100] (got {})", o.anderson);
   if (!(o.epsilon_factor > 0.0 && o.epsilon_factor < 1.0))
     fail("option --epsilon-factor must be in (0, 1) (got {})", o.epsilon_factor);
   if (!(o.stage_tolerance > 0.0) || !std::isfinite(o.stage_tolerance))
     fail("option --stage-tolerance must be positive (got {})", o.stage_tolerance);
   if (!o.source.empty()) check_resolution(o.resolution);
-  if (!o.json.empty()) check_output_file(o.json);
+  if (!o.json.empty()) {
+    check_output_file(o.json);
+    // Only an earlier result of d2gs imr is replaced (an object with "imr" and "pairs"): not a model given
+    // as input, a run's config.json or any other file named by mistake.
+    std::error_code ec;
+    if (fs::exists(o.json, ec)) {
+      nlohmann::json earlier;
+      try {
+        earlier = read_json_file(o.json);
+      } catch (const Error&) {
+      }
+      if (!earlier.is_object() || !earlier.contains("imr") || !earlier.contains("pairs"))
+        fail_file(o.json, "exists and is not an earlier result of d2gs imr: --json replaces only those (choose another file)");
+    }
+  }
   ImrOptions options;
   options.mixture.samples = o.samples;
   options.mixture.phase = o.strata_phase;

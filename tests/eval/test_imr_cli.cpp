@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "d2gs/core/atomic_file.hpp"
 #include "d2gs/eval/imr.hpp"
 #include "d2gs/model/ply.hpp"
 #include "d2gs/scene/scene.hpp"
@@ -108,6 +109,19 @@ TEST(ImrCli, WarnsWithoutSceneAndRejectsBadInput) {
   const auto missing = test::run_cli("imr " + a + " '" + (dir / "nothing").string() + "'");
   EXPECT_EQ(missing.exit_code, 1);
   EXPECT_NE(missing.output.find("no such model file or run folder"), std::string::npos) << missing.output;
+  // --json replaces an earlier result only: not an input model, nor any other file.
+  const std::string model_a = read_file(dir / "a.ply");
+  const auto onto_input = test::run_cli("imr " + a + " " + b + " --samples 100 --json " + a);
+  EXPECT_EQ(onto_input.exit_code, 1) << onto_input.output;
+  EXPECT_NE(onto_input.output.find("a.ply: exists and is not an earlier result of d2gs imr"), std::string::npos)
+      << onto_input.output;
+  EXPECT_EQ(read_file(dir / "a.ply"), model_a);
+  const std::string out = "'" + (dir / "imr.json").string() + "'";
+  EXPECT_EQ(test::run_cli("imr " + a + " " + b + " --samples 100 --json " + out).exit_code, 0);
+  EXPECT_EQ(test::run_cli("imr " + a + " " + b + " --samples 100 --json " + out).exit_code, 0);  // its own: replaced
+  const auto threads = test::run_cli("imr " + a + " " + b + " --threads 100000");
+  EXPECT_EQ(threads.exit_code, 1) << threads.output;
+  EXPECT_NE(threads.output.find("option --threads must be in [0, 1024] (got 100000)"), std::string::npos) << threads.output;
   const auto empty_run = test::run_cli("imr " + a + " '" + dir.string() + "'");
   EXPECT_EQ(empty_run.exit_code, 1);
   EXPECT_NE(empty_run.output.find("point_cloud/iteration_N"), std::string::npos) << empty_run.output;
