@@ -181,6 +181,18 @@ Run add_init_command(CLI::App& app) {
         fail_file(dir, "already holds a training geometry ({}); remove it first, or write this one elsewhere with -o",
                   file);
     }
+    // Nor are files of the names its depth maps take (a scene folder given as -o holds the demo's true
+    // depth maps in depth/NAME.npy).
+    if (g.dense)
+      for (int v : split.train) {
+        const std::string stem = std::filesystem::path(scene.cameras[static_cast<std::size_t>(v)].image_name).stem().string();
+        for (const std::string& name : {stem + ".npy", stem + "_valid.png", stem + "_depth.png"}) {
+          std::error_code ec;
+          if (std::filesystem::exists(dir / "depth" / name, ec))
+            fail_file(dir / "depth" / name, "exists, and d2gs init writes its depth maps there: write the geometry "
+                      "elsewhere with -o");
+        }
+      }
     const TrainingGeometry geo = build_training_geometry(scene, split.train, g);
     write_training_geometry(dir, scene, geo, g);
     std::string line = fmt::format("init: {} sparse points (mean reprojection error {:.3f} px)", geo.sparse.size(),

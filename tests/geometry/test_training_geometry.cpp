@@ -138,6 +138,20 @@ TEST(TrainingGeometry, CachedGeometryIsReusedOnlyWhenItMatches) {
   other.triangulation.min_angle_deg = 2.0;
   EXPECT_FALSE(find_training_geometry(dir / "a", f.scene, f.split.train, other));
   EXPECT_TRUE(find_training_geometry(dir / "a", f.scene, f.split.train, o));
+  // The same names and options, but another image file or a moved camera (a scene regenerated or
+  // re-processed): not a match either.
+  Fern3 moved = fern3();
+  moved.scene.cameras[10].t_world_to_cam.x += 0.01;
+  EXPECT_FALSE(find_training_geometry(dir / "a", moved.scene, f.split.train, o));
+  Fern3 other_image = fern3();
+  other_image.scene.cameras[10].image_path = f.scene.cameras[11].image_path;
+  EXPECT_FALSE(find_training_geometry(dir / "a", other_image.scene, f.split.train, o));
+  // A manifest from before the fingerprints is taken on its names, as then.
+  auto manifest = nlohmann::json::parse(read_file(dir / "a/init.json"));
+  ASSERT_TRUE(manifest.contains("view_fingerprints"));
+  manifest.erase("view_fingerprints");
+  write_file_atomic(dir / "a/init.json", manifest.dump());
+  EXPECT_TRUE(find_training_geometry(dir / "a", moved.scene, f.split.train, o));
 }
 
 TEST(TrainingGeometry, ViewsThatDoNotOverlapGiveAOneLineError) {
@@ -194,6 +208,16 @@ TEST(TrainingGeometry, InitCommandWritesTheLayoutAndTheTrainerLoadsItsDepthPrior
       << again.output;
   EXPECT_EQ(again.output.find("SIFT"), std::string::npos) << "the work was done first:\n" << again.output;
   EXPECT_EQ(read_file(dir / "init/dense/fused.ply"), cloud);
+  // A folder holding files of the names its depth maps take (the demo's true depth in SCENE/depth/) is
+  // refused too, before the work.
+  fs::create_directories(dir / "scene_like/depth");
+  write_file_atomic(dir / "scene_like/depth/image010.npy", "the user's");
+  const auto depth = test::run_cli(
+      fmt::format("init -s '{}' --n-views 3 -r 8 -o '{}' --dense-method sgbm", fern().string(), (dir / "scene_like").string()));
+  EXPECT_EQ(depth.exit_code, 1) << depth.output;
+  EXPECT_NE(depth.output.find((dir / "scene_like/depth/image010.npy").string() + ": exists"), std::string::npos)
+      << depth.output;
+  EXPECT_EQ(read_file(dir / "scene_like/depth/image010.npy"), "the user's");
   // The depth maps as DAFE priors of a short D²GS run that initialises from the same cloud.
   const auto t = test::run_cli(fmt::format(
       "-q train -s '{}' -m '{}' -r 8 --n-views 3 --iterations 2 --method d2gs --init '{}' --dafe-prior '{}' "

@@ -9,6 +9,7 @@
 #include <spdlog/spdlog.h>
 
 #include "d2gs/core/atomic_file.hpp"
+#include "d2gs/core/checksum.hpp"
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/npy.hpp"
 #include "d2gs/core/random.hpp"
@@ -447,6 +448,42 @@ void dense_sgbm(TrainingGeometry& g, const std::vector<const Camera*>& cams, con
 
 }  // namespace
 
+namespace {
+
+// What the geometry was built from, view by view: the CRC-32 of each image file and the camera centre. A
+// scene regenerated or re-processed under the same image names (d2gs demo --seed, new poses) is then not
+// taken for the one its cached geometry saw.
+nlohmann::json view_fingerprints(const Scene& scene, const std::vector<int>& views) {
+  nlohmann::json out = nlohmann::json::array();
+  for (int v : views) {
+    const Camera& cam = scene.cameras[static_cast<std::size_t>(v)];
+    const glm::dvec3 c = cam.center_world();
+    out.push_back({{"crc32", crc32(read_file(cam.image_path))}, {"centre", {c.x, c.y, c.z}}});
+  }
+  return out;
+}
+
+// "" when `recorded` (a manifest's "view_fingerprints") matches the scene's views now, else what differs.
+std::string fingerprint_difference(const nlohmann::json& recorded, const nlohmann::json& now,
+                                   const nlohmann::json& names) {
+  if (!recorded.is_array() || recorded.size() != now.size()) return "another number of views";
+  for (std::size_t k = 0; k < now.size(); ++k) {
+    const auto& r = recorded[k];
+    if (!r.is_object() || r.value("crc32", nlohmann::json()) != now[k]["crc32"])
+      return fmt::format("the image {} has changed", names[k].get<std::string>());
+    const auto& c = r.value("centre", nlohmann::json());
+    for (std::size_t i = 0; i < 3; ++i) {
+      const double is = now[k]["centre"][i].get<double>();
+      if (!c.is_array() || c.size() != 3 || !c[i].is_number() ||
+          !(std::abs(c[i].get<double>() - is) <= 1e-6 * (1.0 + std::abs(is))))
+        return fmt::format("the camera of {} has moved", names[k].get<std::string>());
+    }
+  }
+  return "";
+}
+
+}  // namespace
+
 fs::path training_geometry_dir(const Scene& scene, std::size_t n_views) {
   return scene.root / fmt::format("{}_views", n_views);
 }
@@ -483,6 +520,7 @@ void write_training_geometry(const fs::path& dir, const Scene& scene, const Trai
       {"image_names", names},
       {"resolution", scene.resolution},
       {"image_source", to_string(scene.image_source)},
+      {"view_fingerprints", view_fingerprints(scene, g.views)},
       {"width", scene.cameras[static_cast<std::size_t>(g.views[0])].width},
       {"height", scene.cameras[static_cast<std::size_t>(g.views[0])].height},
       {"geometry_resolution", g.geometry_resolution},
@@ -521,6 +559,14 @@ std::optional<CachedTrainingGeometry> find_training_geometry(const fs::path& dir
         m.value("image_source", "folder") != std::string(to_string(scene.image_source)) ||
         m.value("options", "") != options_key(options, scene.resolution, geometry_resolution(scene, options)))
       return std::nullopt;
+    // Manifests written before 2026-12-02 record no fingerprints and are taken on their names as before.
+    if (m.contains("view_fingerprints")) {
+      const std::string why = fingerprint_difference(m["view_fingerprints"], view_fingerprints(scene, views), names);
+      if (!why.empty()) {
+        spdlog::warn("{}: not reused: {} since this geometry was built", dir.string(), why);
+        return std::nullopt;
+      }
+    }
     CachedTrainingGeometry c;
     c.dir = dir;
     c.sparse_ply = dir / m.value("sparse", "sparse/points3D.ply");
