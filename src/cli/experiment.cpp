@@ -31,6 +31,7 @@ struct ExperimentOptions {
   bool no_imr = false;
   bool emit_slurm = false;
   experiment::SlurmOptions slurm;
+  bool slurm_given = false;  // any --slurm-* option on the command line
 };
 
 void print_collect(const experiment::CollectResult& r) {
@@ -41,6 +42,14 @@ void print_collect(const experiment::CollectResult& r) {
 }
 
 int run_experiment_command(const ExperimentOptions& o) {
+  // One mode at a time; --jobs only where runs are trained.
+  const int modes = int(o.list) + int(o.collect) + int(o.emit_slurm) + int(o.run_index >= 0);
+  if (modes > 1)
+    fail("options --list, --collect (or collect), --emit-slurm and --run-index are different modes: give one of them");
+  if (o.jobs != 1 && (o.list || o.collect || o.emit_slurm || o.run_index >= 0))
+    fail("option --jobs applies to training the runs here; with {} it does nothing",
+         o.list ? "--list" : o.collect ? "--collect" : o.emit_slurm ? "--emit-slurm" : "--run-index (one run)");
+  if (o.slurm_given && !o.emit_slurm) fail("the --slurm-* options apply to --emit-slurm only");
   const fs::path out = fs::absolute(o.out).lexically_normal();
   check_output_folder(out);  // an -o under a file fails now, not after the runs
   const auto progress = [](const std::string& line) { spdlog::info("experiment: {}", line); };
@@ -55,6 +64,23 @@ int run_experiment_command(const ExperimentOptions& o) {
                           "experiment file outside that folder, or give -o alone to use the stored experiment");
     config = experiment::load_experiment_config(o.config, o.data_root);
     runs = experiment::expand_runs(config, out);
+    // A folder holding another experiment's state is not re-pointed at this one (its finished runs would
+    // drop out of the tables); an edited file of the same experiment (more seeds, another method) is fine.
+    if (fs::exists(out / "experiment.json", ec)) {
+      const auto stored = experiment::read_experiment_state(out);
+      if (stored.first.name != config.name)
+        fail_file(out, "holds experiment '{}' (from {}), not '{}' of {}: give each experiment its own folder",
+                  stored.first.name, stored.first.file.string(), config.name, o.config);
+      // A Slurm task (--run-index) trains run I of the list the array was made from: the folder's.
+      if (o.run_index >= 0) {
+        bool same = stored.second.size() == runs.size();
+        for (std::size_t k = 0; same && k < runs.size(); ++k) same = stored.second[k].id() == runs[k].id();
+        if (!same)
+          fail_file(o.config, "gives other runs than the experiment in {} (its run {} would be another): update the "
+                    "folder with the whole experiment once (--config without --run-index, or --emit-slurm), then "
+                    "its tasks", out.string(), o.run_index);
+      }
+    }
   } else {
     if (!o.data_root.empty()) fail("option --data-root needs --config");
     std::tie(config, runs) = experiment::read_experiment_state(out);
@@ -66,7 +92,10 @@ int run_experiment_command(const ExperimentOptions& o) {
     experiment::check_finished_runs_match(
         out, one ? std::vector<experiment::RunSpec>{runs[static_cast<std::size_t>(o.run_index)]} : runs);
   }
-  if (!o.config.empty() && (o.run_index < 0 || !fs::exists(out / "experiment.json")))
+  if (o.run_index >= static_cast<int>(runs.size()))
+    fail("option --run-index {} is outside the experiment's {} runs (0..{})", o.run_index, runs.size(), runs.size() - 1);
+  // --list changes nothing; the other modes keep the folder's state the experiment file's.
+  if (!o.config.empty() && !o.list && (o.run_index < 0 || !fs::exists(out / "experiment.json")))
     experiment::write_experiment_state(out, config, runs);
 
   experiment::CollectOptions co;
@@ -111,9 +140,7 @@ int run_experiment_command(const ExperimentOptions& o) {
   ro.progress = progress;
   std::vector<experiment::RunSpec> todo = runs;
   if (o.run_index >= 0) {
-    if (o.run_index >= static_cast<int>(runs.size()))
-      fail("option --run-index {} is outside the experiment's {} runs (0..{})", o.run_index, runs.size(), runs.size() - 1);
-    todo = {runs[static_cast<std::size_t>(o.run_index)]};
+    todo = {runs[static_cast<std::size_t>(o.run_index)]};  // in range: checked above
     ro.jobs = 1;
   }
   const auto outcomes = experiment::run_all(todo, out, ro);
@@ -180,8 +207,11 @@ Run add_experiment_command(CLI::App& app) {
   collect->add_flag("--no-imr", *collect_no_imr, "Skip the IMR computation");
   cmd->require_subcommand(0, 1);
 
-  return [o, collect, collect_out, collect_no_imr]() -> int {
+  return [o, cmd, collect, collect_out, collect_no_imr]() -> int {
     ExperimentOptions opts = *o;
+    for (const char* flag : {"--slurm-partition", "--slurm-account", "--slurm-time", "--slurm-cpus", "--slurm-gpus",
+                             "--slurm-mem", "--slurm-max-parallel", "--slurm-program"})
+      opts.slurm_given = opts.slurm_given || cmd->count(flag) > 0;
     if (collect->parsed()) {
       opts.out = *collect_out;
       opts.collect = true;

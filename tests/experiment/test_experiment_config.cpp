@@ -270,7 +270,7 @@ TEST(ExperimentCli, AFoldersStateGivenAsTheExperimentFileSaysWhatItIs) {
   const auto dir = test::scratch_dir();
   const auto shipped = test::source_dir() / "configs/experiments/llff_fern_3views.json";
   const auto first = test::run_cli("experiment --config '" + shipped.string() + "' --data-root '" +
-                                   test::shared_data().string() + "' -o '" + (dir / "a").string() + "' --list");
+                                   test::shared_data().string() + "' -o '" + (dir / "a").string() + "' --emit-slurm");
   ASSERT_EQ(first.exit_code, 0) << first.output;
   const auto state = dir / "a" / "experiment.json";
   const auto r = test::run_cli("experiment --config '" + state.string() + "' -o '" + (dir / "b").string() + "' --list");

@@ -75,6 +75,63 @@ TEST(ExperimentRuns, StoredStateKeepsRelativeInitCloudsUnderTheDataRoot) {
   }
 }
 
+// What a folder and its modes refuse before anything is written or trained (none of these trains).
+TEST(ExperimentCli, ModesOtherExperimentsAndRunListsAreChecked) {
+  const auto dir = test::scratch_dir();
+  int code = 0;
+  const auto config = write_config(dir, {{{"method", "3dgs"}}}, {0, 1}, 2, 1);
+  const auto out = dir / "exp";
+  // --list changes nothing, not even a new folder's state.
+  experiment(config, out, "--list", &code);
+  EXPECT_EQ(code, 0);
+  EXPECT_FALSE(fs::exists(out / "experiment.json"));
+  // One mode at a time, and options only where they apply.
+  for (const char* extra : {"--list --collect", "--emit-slurm --run-index 1", "--collect --run-index 1",
+                            "--list --jobs 2", "--list --slurm-cpus 3"}) {
+    const std::string output = experiment(config, out, extra, &code);
+    EXPECT_EQ(code, 1) << extra << "\n" << output;
+    EXPECT_NE(output.find("d2gs: error: "), std::string::npos) << extra << "\n" << output;
+  }
+  EXPECT_FALSE(fs::exists(out));
+  // An out-of-range --run-index writes nothing either.
+  EXPECT_NE(experiment(config, out, "--run-index 7", &code).find("outside the experiment's 2 runs"), std::string::npos);
+  EXPECT_FALSE(fs::exists(out / "experiment.json"));
+  // The folder's state; another experiment's file is not given this folder.
+  experiment(config, out, "--emit-slurm", &code);
+  ASSERT_EQ(code, 0);
+  const std::string state = read_file(out / "experiment.json");
+  auto other = nlohmann::json::parse(read_file(config));
+  other["name"] = "other";
+  write_file_atomic(dir / "other.json", other.dump());
+  const std::string repointed = experiment(dir / "other.json", out, "--emit-slurm", &code);
+  EXPECT_EQ(code, 1) << repointed;
+  EXPECT_NE(repointed.find(out.string() + ": holds experiment 'tiny'"), std::string::npos) << repointed;
+  EXPECT_EQ(read_file(out / "experiment.json"), state);
+  // A task of the array (--run-index) with an edited file whose run list differs from the folder's.
+  auto more = nlohmann::json::parse(read_file(config));
+  more["seeds"] = {5, 0, 1};
+  write_file_atomic(dir / "more.json", more.dump());
+  const std::string task = experiment(dir / "more.json", out, "--run-index 0", &code);
+  EXPECT_EQ(code, 1) << task;
+  EXPECT_NE(task.find("gives other runs than the experiment in"), std::string::npos) << task;
+  EXPECT_FALSE(fs::exists(out / "runs/fern/3v/3dgs/seed5"));
+  // Names that would give two runs one id, and a name with a line break (it reached the Slurm script).
+  auto clash = nlohmann::json::parse(read_file(config));
+  clash["scenes"][0]["name"] = "s__3v__3dgs";
+  write_file_atomic(dir / "clash.json", clash.dump());
+  EXPECT_NE(experiment(dir / "clash.json", dir / "clash", "--list", &code).find("(no '__')"), std::string::npos);
+  EXPECT_EQ(code, 1);
+  auto injected = nlohmann::json::parse(read_file(config));
+  injected["name"] = "x\ntouch /tmp/INJECTED\n#";
+  write_file_atomic(dir / "injected.json", injected.dump());
+  EXPECT_NE(experiment(dir / "injected.json", dir / "inj", "--emit-slurm", &code).find("without control characters"),
+            std::string::npos);
+  EXPECT_EQ(code, 1);
+  EXPECT_FALSE(fs::exists(dir / "inj/slurm"));
+  EXPECT_NE(experiment(config, dir / "s2", "--emit-slurm --slurm-gpus -3", &code).find("--slurm-gpus must be ≥ 0"),
+            std::string::npos);
+}
+
 TEST(ExperimentRuns, TwoMethodsTwoSeedsInParallelThenSkipped) {
   const auto dir = test::scratch_dir();
   const auto config = write_config(dir, {{{"method", "3dgs"}}, {{"method", "dropgaussian"}}}, {0, 1}, 6, 3);

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <limits>
+#include <map>
 #include <set>
 #include <type_traits>
 
@@ -22,8 +23,10 @@ namespace fs = std::filesystem;
 namespace {
 
 // Names become folder names: letters, digits, '.', '_' and '-' only, not starting with '.'.
+// Letters, digits, '.', '_', '-', and no "__", which separates the parts of a run's id (RunSpec::id): a
+// scene "s__3v__3dgs-v" and a variant "v__3v__3dgs" of scene "s" gave two runs one id, one log and one lock.
 bool safe_name(const std::string& s) {
-  if (s.empty() || s.size() > 64 || s.front() == '.') return false;
+  if (s.empty() || s.size() > 64 || s.front() == '.' || s.find("__") != std::string::npos) return false;
   return std::all_of(s.begin(), s.end(), [](char c) {
     return (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '.' || c == '_' ||
            c == '-';
@@ -116,6 +119,10 @@ ExperimentConfig parse_experiment_config(const nlohmann::json& j, const fs::path
   c.raw = j;
   const std::string top = "the experiment";
   c.name = get<std::string>(j, "name", file.stem().string(), file, top);
+  // The name goes into tables, the report and the Slurm scripts' comments: no line breaks or other control
+  // characters (a newline in it became a command of the emitted script).
+  if (c.name.empty() || std::any_of(c.name.begin(), c.name.end(), [](char ch) { return static_cast<unsigned char>(ch) < 0x20 || ch == 0x7f; }))
+    fail_file(file, "'name' must be a non-empty line of text without control characters, got {}", nlohmann::json(c.name).dump());
   c.description = get<std::string>(j, "description", "", file, top);
   c.data_root = data_root_override.empty() ? get<std::string>(j, "data_root", "", file, top) : data_root_override;
   if (!j.contains("scenes") || !j["scenes"].is_array() || j["scenes"].empty())
@@ -128,7 +135,7 @@ ExperimentConfig parse_experiment_config(const nlohmann::json& j, const fs::path
     spec.source = get<std::string>(s, "source", "", file, "a scene");
     if (spec.source.empty()) fail_file(file, "a scene has no 'source'");
     spec.name = get<std::string>(s, "name", fs::path(spec.source).filename().string(), file, "scene " + spec.source);
-    if (!safe_name(spec.name)) fail_file(file, "scene name '{}' must be letters, digits, '.', '_' or '-'", spec.name);
+    if (!safe_name(spec.name)) fail_file(file, "scene name '{}' must be letters, digits, '.', '_' or '-' (no '__')", spec.name);
     if (!names.insert(spec.name).second) fail_file(file, "scene name '{}' appears twice", spec.name);
     spec.scene_preset = get<std::string>(s, "scene_preset", "", file, "scene " + spec.name);
     spec.train = s.value("train", nlohmann::json::object());
@@ -163,7 +170,7 @@ ExperimentConfig parse_experiment_config(const nlohmann::json& j, const fs::path
     }
     spec.variant = get<std::string>(m, "variant", "", file, "method " + spec.method);
     if (!spec.variant.empty() && !safe_name(spec.variant))
-      fail_file(file, "variant name '{}' must be letters, digits, '.', '_' or '-'", spec.variant);
+      fail_file(file, "variant name '{}' must be letters, digits, '.', '_' or '-' (no '__')", spec.variant);
     const std::string where = "method " + spec.label();
     if (!labels.insert(spec.label()).second) fail_file(file, "method '{}' appears twice (give it a variant)", spec.label());
     spec.preset = get<std::string>(m, "preset", "", file, where);
@@ -261,6 +268,11 @@ std::vector<RunSpec> expand_runs(const ExperimentConfig& config, const fs::path&
           to_json(r.train_config, c);
           runs.push_back(std::move(r));
         }
+  // Each run's log, config and lock are named by its id: two runs of one id would share them.
+  std::map<std::string, int> ids;
+  for (const auto& r : runs)
+    if (const auto [it, fresh] = ids.emplace(r.id(), r.index); !fresh)
+      fail_file(config.file, "runs {} and {} have one id ({}): rename a scene or a variant", it->second, r.index, r.id());
   return runs;
 }
 

@@ -1,6 +1,9 @@
 #include "d2gs/experiment/slurm.hpp"
 
+#include <algorithm>
+
 #include <fmt/format.h>
+#include <nlohmann/json.hpp>
 
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
@@ -35,8 +38,15 @@ void check(const SlurmOptions& o) {
   if (o.program.empty() || !o.program.is_absolute()) fail("slurm: the d2gs program path must be absolute");
   if (o.out_dir.empty() || !o.out_dir.is_absolute()) fail("slurm: the experiment folder must be absolute");
   if (o.cpus < 1) fail("slurm: --slurm-cpus must be ≥ 1");
+  if (o.gpus < 0) fail("slurm: --slurm-gpus must be ≥ 0 (got {})", o.gpus);
+  if (o.max_parallel < 0) fail("slurm: --slurm-max-parallel must be ≥ 0 (got {})", o.max_parallel);
+  if (o.time.empty()) fail("slurm: --slurm-time must not be empty (e.g. 02:00:00)");
   for (const std::string* v : {&o.partition, &o.account, &o.time, &o.mem})
     if (v->find_first_of(" \t\n'\"\\$`") != std::string::npos) fail("slurm: option value '{}' has unsafe characters", *v);
+  // The paths also stand unquoted in #SBATCH lines and comments: a line break there would end the line.
+  for (const fs::path* p : {&o.program, &o.out_dir})
+    if (std::any_of(p->native().begin(), p->native().end(), [](char c) { return static_cast<unsigned char>(c) < 0x20; }))
+      fail("slurm: the path {} holds a line break or another control character", nlohmann::json(p->string()).dump());
 }
 
 }  // namespace
