@@ -100,6 +100,17 @@ TEST(AtomicFile, ReadsOnlyRegularFiles) {
   fs::create_symlink(dir / "loop_b", dir / "loop_a");
   fs::create_symlink(dir / "loop_a", dir / "loop_b");
   EXPECT_EQ(message(dir / "loop_a").rfind((dir / "loop_a").string() + ": cannot be read: ", 0), 0u) << message(dir / "loop_a");
+  // The same as output folders: refused before any work (create_directories failed on them after it).
+  EXPECT_THROW(check_output_folder(dir / "loop_a"), Error);
+  fs::create_symlink(dir / "nowhere", dir / "dangling");
+  try {
+    check_output_folder(dir / "dangling");
+    ADD_FAILURE() << "a dangling link was taken as a folder to create";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("is a symbolic link to " + (dir / "nowhere").string() + ", which does not exist"),
+              std::string::npos)
+        << e.what();
+  }
   write_file_atomic(dir / "file", "x");
   fs::create_symlink(dir / "file", dir / "link");
   EXPECT_EQ(read_file(dir / "link"), "x");

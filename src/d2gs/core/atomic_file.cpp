@@ -112,6 +112,11 @@ std::string folder_obstacle(const fs::path& dir) {
       return fmt::format("folder {} is not writable ({})", path.string(), std::strerror(errno));
     return {};
   }
+  // Neither there nor creatable: a loop of symbolic links, or a link to nothing (create_directories fails
+  // on both, after the work).
+  if (ec) return fmt::format("cannot resolve {} ({})", path.string(), ec.message());
+  if (fs::is_symlink(fs::symlink_status(path, ec)))
+    return fmt::format("{} is a symbolic link to {}, which does not exist", path.string(), fs::read_symlink(path, ec).string());
   for (fs::path a = path.parent_path();; a = a.parent_path()) {
     if (fs::exists(a, ec)) {
       if (!fs::is_directory(a, ec)) return fmt::format("{} is a file, not a folder", a.string());
