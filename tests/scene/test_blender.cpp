@@ -184,6 +184,20 @@ TEST(BlenderBadInput, DamagedJson) {
   j["frames"][0].erase("file_path");
   test::write_bytes(path, j.dump());
   expect_error([&] { load_scene(root); }, {path.string(), "frame 0", "file_path"});
+  // Finite but impossible: a mirrored frame (x negated: an orthonormal matrix of determinant −1), a field of
+  // view so narrow that fx overflows, a camera at 1e300.
+  j = good;
+  for (int r = 0; r < 3; ++r) j["frames"][5]["transform_matrix"][r][0] = -j["frames"][5]["transform_matrix"][r][0].get<double>();
+  test::write_bytes(path, j.dump());
+  expect_error([&] { load_scene(root); }, {path.string(), "frame 5", "reflection"});
+  j = good;
+  j["camera_angle_x"] = 1e-300;
+  test::write_bytes(path, j.dump());
+  expect_error([&] { load_scene(root); }, {path.string(), "frame 0", "no pinhole camera's"});
+  j = good;
+  j["frames"][6]["transform_matrix"][1][3] = 1e300;
+  test::write_bytes(path, j.dump());
+  expect_error([&] { load_scene(root); }, {path.string(), "frame 6", "beyond 10⁹ units"});
   // The parser directly: a JSON document that is not an object.
   expect_error([] { parse_blender_transforms("[1, 2]", "t.json"); }, {"t.json", "object"});
 }

@@ -408,6 +408,26 @@ TEST(ColmapBadInput, NonFiniteValues) {
   model.cameras[0].params[0] = -5;
   write_colmap_binary(model, root / "sparse" / "0");
   expect_error([&] { load_scene(root); }, {"cameras.bin", "focal"});
+  // Finite but impossible (each trained to a "successful" 6–12 dB before): a focal of 1e-30 or 1e30, a
+  // principal point far outside the image, a camera at 1e300, a point beyond float's range.
+  for (const double focal : {1e-30, 1e30}) {
+    model = read_colmap_model(test::room_dir() / "sparse" / "0");
+    model.cameras[0].params[0] = focal;
+    write_colmap_binary(model, root / "sparse" / "0");
+    expect_error([&] { load_scene(root); }, {"images.bin", "camera 1 of cameras.bin", "no pinhole camera's"});
+  }
+  model = read_colmap_model(test::room_dir() / "sparse" / "0");
+  model.cameras[0].params[2] = 1e9;  // PINHOLE: fx fy cx cy
+  write_colmap_binary(model, root / "sparse" / "0");
+  expect_error([&] { load_scene(root); }, {"images.bin", "principal point", "far outside"});
+  model = read_colmap_model(test::room_dir() / "sparse" / "0");
+  model.images[4].tvec[0] = 1e300;
+  write_colmap_binary(model, root / "sparse" / "0");
+  expect_error([&] { load_scene(root); }, {"images.bin", model.images[4].name, "beyond 10⁹ units"});
+  model = read_colmap_model(test::room_dir() / "sparse" / "0");
+  model.points[10].xyz[0] = 1e300;
+  write_colmap_binary(model, root / "sparse" / "0");
+  expect_error([&] { load_scene(root); }, {"points3D.bin", "beyond any scene"});
 }
 
 }  // namespace

@@ -210,6 +210,10 @@ TEST(LlffBadInput, NanRowWrongShapeRowCountCorruptMagic) {
   far_centre[5 * 17 + 8] = 1e30;
   write_poses(npy, {20, 17}, far_centre);
   expect_error([&] { load_scene(root, res(8)); }, {npy.string(), "row 5", "camera centre", "beyond"});
+  auto mirrored = raw.values;  // the "down" column negated: orthonormal, determinant −1
+  for (int r = 0; r < 3; ++r) mirrored[6 * 17 + r * 5 + 0] = -mirrored[6 * 17 + r * 5 + 0];
+  write_poses(npy, {20, 17}, mirrored);
+  expect_error([&] { load_scene(root, res(8)); }, {npy.string(), "row 6", "reflection"});
 
   std::string bytes = read_file(test::fern_dir() / "poses_bounds.npy");
   bytes[1] = 'X';

@@ -129,6 +129,8 @@ Scene load_blender_scene(const fs::path& root, const SceneLoadOptions& options) 
       cam.cy = 0.5 * cam.height;
       cam.R_world_to_cam = frame.R_world_to_cam;
       cam.t_world_to_cam = -(frame.R_world_to_cam * frame.center);
+      if (const std::string why = implausible_camera(cam); !why.empty())
+        fail_file(json_path, "frame {} ({}): {}", &frame - transforms.frames.data(), frame.file_path, why);
       const auto folder = fs::relative(cam.image_path.parent_path(), root, ec).generic_string();
       if (std::find(folders.begin(), folders.end(), folder) == folders.end()) folders.push_back(folder);
       (std::string_view(split) == "train" ? scene.dataset_train : scene.dataset_test)

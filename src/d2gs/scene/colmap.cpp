@@ -510,6 +510,10 @@ PointCloud colmap_point_cloud(const std::vector<ColmapPoint3D>& points, const fs
   for (const auto& p : points) {
     if (!std::isfinite(p.xyz[0]) || !std::isfinite(p.xyz[1]) || !std::isfinite(p.xyz[2]))
       fail_file(source, "point {} has a non-finite position", p.id);
+    // Stored as float: a position beyond its range would become inf there (and the kNN of the initial
+    // Gaussians' scales then fails without naming the file).
+    for (const double v : p.xyz)
+      if (std::abs(v) > 1e30) fail_file(source, "point {} lies at {}, beyond any scene", p.id, v);
     cloud.positions.emplace_back(static_cast<float>(p.xyz[0]), static_cast<float>(p.xyz[1]),
                                  static_cast<float>(p.xyz[2]));
     cloud.colors.emplace_back(p.rgb[0], p.rgb[1], p.rgb[2]);
@@ -612,6 +616,8 @@ Scene load_colmap_scene(const fs::path& root, const SceneLoadOptions& options) {
       if (!std::isfinite(t)) fail_file(images_path, "image {} has a non-finite translation", im.name);
     cam.R_world_to_cam = colmap_quaternion_to_matrix(im.qvec, images_path);
     cam.t_world_to_cam = glm::dvec3(im.tvec[0], im.tvec[1], im.tvec[2]);
+    if (const std::string why = implausible_camera(cam); !why.empty())
+      fail_file(images_path, "image {} (camera {} of {}): {}", im.name, c.id, cameras_path.filename().string(), why);
     scene.cameras.push_back(std::move(cam));
   }
 

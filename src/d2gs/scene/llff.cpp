@@ -74,17 +74,16 @@ std::vector<LlffPose> parse_llff_poses(const NpyArray& array, const fs::path& so
     if (p.height <= 0 || p.width <= 0 || p.focal <= 0)
       fail_file(source, "row {}: height, width and focal must be positive, found {}, {}, {}", k,
                 p.height, p.width, p.focal);
-    // Finite is not enough: later products of these (squared distances, f² in the projection's Jacobian)
-    // must stay finite too. A focal below 1 % of the image size is a field of view above 176°, no pinhole's;
-    // camera centres beyond 10⁹ units are no scene's (LLFF's poses are in the scene's own, bounded units).
-    const double size = std::max(p.width, p.height);
-    if (p.focal < 0.01 * size || p.focal > 1e6 * size)
-      fail_file(source, "row {}: focal {} for a {}×{} image is no pinhole camera's (expected {} to {} pixels)", k,
-                p.focal, p.width, p.height, 0.01 * size, 1e6 * size);
-    for (int i = 0; i < 3; ++i)
-      if (std::abs(p.center[i]) > 1e9)
-        fail_file(source, "row {}: camera centre ({}, {}, {}) is beyond 10⁹ units, no scene's", k, p.center.x,
-                  p.center.y, p.center.z);
+    // Finite is not enough (implausible_camera, scene/camera.hpp), checked here at the poses' own size.
+    Camera at_full;
+    at_full.width = static_cast<int>(std::lround(std::min(p.width, 1e9)));
+    at_full.height = static_cast<int>(std::lround(std::min(p.height, 1e9)));
+    at_full.fx = at_full.fy = p.focal;
+    at_full.cx = 0.5 * at_full.width;
+    at_full.cy = 0.5 * at_full.height;
+    at_full.R_world_to_cam = p.R_world_to_cam;
+    at_full.t_world_to_cam = -(p.R_world_to_cam * p.center);
+    if (const std::string why = implausible_camera(at_full); !why.empty()) fail_file(source, "row {}: {}", k, why);
     poses.push_back(p);
   }
   return poses;
