@@ -166,8 +166,11 @@ Run add_init_command(CLI::App& app) {
       g.fusion.pixel_stride = o->dense_stride;
       g.patch_match_fusion.pixel_stride = o->dense_stride;
     }
-    validate(g.patch_match);
-    validate(g.patch_match_fusion);
+    validate(g);  // every option, before the work
+    if (!o->compare_cloud.empty() && !g.dense)
+      fail("option --compare-cloud measures the dense cloud, which --no-dense does not make");
+    if (o->oracle_accuracy && scene.sfm_points.empty())
+      fail("{}: the scene has no SfM points for --oracle-accuracy to measure against", o->scene.source);
     PointCloud compare;
     if (!o->compare_cloud.empty()) compare = read_point_cloud_ply(o->compare_cloud);  // before the work
     const std::filesystem::path dir =
@@ -194,6 +197,10 @@ Run add_init_command(CLI::App& app) {
         }
       }
     const TrainingGeometry geo = build_training_geometry(scene, split.train, g);
+    if (g.dense && geo.dense.empty())  // nothing a training could start from: said, and nothing written
+      fail("init: the stereo of the {} training views fused no point (with --dense-stride {}, the fusion options "
+           "given); nothing written to {}", split.train.size(), o->dense_stride == 0 ? std::string("default") :
+           std::to_string(o->dense_stride), dir.string());
     write_training_geometry(dir, scene, geo, g);
     std::string line = fmt::format("init: {} sparse points (mean reprojection error {:.3f} px)", geo.sparse.size(),
                                    geo.mean_reprojection_px());

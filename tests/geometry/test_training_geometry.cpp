@@ -198,6 +198,32 @@ TEST(TrainingGeometry, InitCommandWritesTheLayoutAndTheTrainerLoadsItsDepthPrior
   EXPECT_EQ(bad.exit_code, 1);
   EXPECT_NE(bad.output.find("d2gs: error: "), std::string::npos) << bad.output;
   EXPECT_NE(bad.output.find("at least 2 views"), std::string::npos) << bad.output;
+  // Options that cannot give a geometry: one line before any work (they were taken, or failed after it with
+  // "views do not overlap enough", or wrote an empty fused cloud).
+  for (const auto& [args, message] : std::vector<std::pair<std::string, std::string>>{
+           {"--fusion-tolerance -1", "option --fusion-tolerance must be in (0, 1] (got -1)"},
+           {"--fusion-tolerance nan", "option --fusion-tolerance must be in (0, 1] (got nan)"},
+           {"--max-features 0", "option --max-features must be ≥ 1 (got 0)"},
+           {"--match-ratio 5", "option --match-ratio must be in (0, 1] (got 5)"},
+           {"--min-angle 200", "option --min-angle must be in [0, 90) degrees (got 200)"},
+           {"--stereo-neighbors 0", "option --stereo-neighbors must be ≥ 1 (got 0)"},
+           {"--sift-contrast -1", "option --sift-contrast must be in (0, 1] (got -1)"}}) {
+    const auto opt = test::run_cli(fmt::format("init -s '{}' --n-views 3 -r 8 -o '{}' --dense-method sgbm {}",
+                                               fern().string(), (dir / "opt").string(), args));
+    EXPECT_EQ(opt.exit_code, 1) << args << "\n" << opt.output;
+    EXPECT_NE(opt.output.find("d2gs: error: " + message), std::string::npos) << args << "\n" << opt.output;
+    EXPECT_EQ(opt.output.find("SIFT"), std::string::npos) << args << ": the work was done first";
+  }
+  const auto compare_sparse = test::run_cli(fmt::format("init -s '{}' --n-views 3 -r 8 -o '{}' --no-dense --compare-cloud '{}'",
+                                                        fern().string(), (dir / "opt").string(),
+                                                        (dir / "init/dense/fused.ply").string()));
+  EXPECT_EQ(compare_sparse.exit_code, 1) << compare_sparse.output;
+  EXPECT_NE(compare_sparse.output.find("--no-dense does not make"), std::string::npos) << compare_sparse.output;
+  const auto sparse_stride = test::run_cli(fmt::format("init -s '{}' --n-views 3 -r 8 -o '{}' --dense-method sgbm "
+                                                       "--dense-stride 1000000", fern().string(), (dir / "opt").string()));
+  EXPECT_EQ(sparse_stride.exit_code, 1) << sparse_stride.output;
+  EXPECT_NE(sparse_stride.output.find("fused no point"), std::string::npos) << sparse_stride.output;
+  EXPECT_FALSE(fs::exists(dir / "opt/init.json"));
   // The same folder again: refused before any work, the first geometry left as it was.
   const std::string cloud = read_file(dir / "init/dense/fused.ply");
   const auto again = test::run_cli(

@@ -67,6 +67,11 @@ struct TrainingGeometryOptions {
   std::uint64_t seed = 0;
 };
 
+// Throws d2gs::Error naming the option (as `d2gs init` spells it) when a value cannot give a geometry: NaN,
+// a ratio outside (0, 1], a count below 1, a negative threshold; the PatchMatch and its fusion's options
+// are checked by their own validate. Called by d2gs init and d2gs train before any work.
+void validate(const TrainingGeometryOptions& options);
+
 struct StepTiming {
   std::string step;
   double seconds = 0.0;
