@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include "d2gs/core/atomic_file.hpp"
+#include "d2gs/core/error.hpp"
 #include "d2gs/experiment/collect.hpp"
 #include "d2gs/experiment/tables.hpp"
 #include "test_paths.hpp"
@@ -65,6 +66,25 @@ Fixture make_fixture() {
     write_file_atomic(f.dir / r.dir / "results.json", res.dump());
   }
   return f;
+}
+
+// A results.json with values no evaluation gives (SSIM 7, −1 Gaussians) is named, not averaged in.
+TEST(Tables, ImpossibleValuesInAResultsFileAreNamed) {
+  const Fixture f = make_fixture();
+  const fs::path file = f.dir / f.runs[0].dir / "results.json";
+  for (const auto& [bad, what] : std::vector<std::pair<nlohmann::json, std::string>>{
+           {{{"mean", {{"PSNR", 20.0}, {"SSIM", 7.0}}}}, "SSIM = 7"},
+           {{{"mean", {{"PSNR", 20.0}, {"SSIM", 0.5}}}, {"gaussians", -1}}, "GAUSSIANS = -1"},
+           {{{"mean", {{"PSNR", 20.0}, {"SSIM", 0.5}, {"LPIPS", -0.1}}}}, "LPIPS = -0.1"}}) {
+    write_file_atomic(file, bad.dump());
+    try {
+      summarize(f.runs, f.dir);
+      ADD_FAILURE() << what << " was tabulated";
+    } catch (const Error& e) {
+      EXPECT_EQ(std::string(e.what()).rfind(file.string() + ": " + what + " is not a value an evaluation gives", 0), 0u)
+          << e.what();
+    }
+  }
 }
 
 TEST(Tables, SummariseGroupsBySceneViewsAndMethod) {

@@ -66,10 +66,20 @@ std::vector<GroupRow> summarize(const std::vector<RunSpec>& runs, const fs::path
     const nlohmann::json j = read_json_file(results);
     ++row.runs_finished;
     auto& v = values[it->second];
-    for (const auto& [name, value] : report::mean_metrics(j)) v[name].push_back(value);
-    if (j.contains("gaussians") && j["gaussians"].is_number()) v["GAUSSIANS"].push_back(j["gaussians"].get<double>());
+    // Values no evaluation gives are not averaged into a table (a hand-edited or foreign results.json).
+    const auto take = [&](const std::string& name, double value, double lo, double hi) {
+      if (!(value >= lo && value <= hi))
+        fail_file(results, "{} = {} is not a value an evaluation gives (expected {} to {})", name, value, lo, hi);
+      v[name].push_back(value);
+    };
+    for (const auto& [name, value] : report::mean_metrics(j)) {
+      if (name == "SSIM") take(name, value, -1.0, 1.0);
+      else if (name == "LPIPS" || name == "AVGE") take(name, value, 0.0, 1e9);
+      else take(name, value, -1e9, 1e9);  // PSNR and others: finite
+    }
+    if (j.contains("gaussians") && j["gaussians"].is_number()) take("GAUSSIANS", j["gaussians"].get<double>(), 0.0, 1e12);
     if (j.contains("train_seconds") && j["train_seconds"].is_number())
-      v["TRAIN_SECONDS"].push_back(j["train_seconds"].get<double>());
+      take("TRAIN_SECONDS", j["train_seconds"].get<double>(), 0.0, 1e12);
   }
   for (auto& [index, metrics] : values)
     for (auto& [name, list] : metrics) rows[index].metrics[name] = mean_std(list);
