@@ -428,6 +428,10 @@ TEST(ColmapBadInput, NonFiniteValues) {
   model.points[10].xyz[0] = 1e300;
   write_colmap_binary(model, root / "sparse" / "0");
   expect_error([&] { load_scene(root); }, {"points3D.bin", "beyond any scene"});
+  model = read_colmap_model(test::room_dir() / "sparse" / "0");
+  model.images[3].qvec = {0, 0, 0, 0};
+  write_colmap_binary(model, root / "sparse" / "0");
+  expect_error([&] { load_scene(root); }, {"images.bin", "image " + model.images[3].name + ": invalid rotation quaternion"});
 }
 
 }  // namespace

@@ -614,7 +614,12 @@ Scene load_colmap_scene(const fs::path& root, const SceneLoadOptions& options) {
     cam.cy = cy * sy;
     for (double t : im.tvec)
       if (!std::isfinite(t)) fail_file(images_path, "image {} has a non-finite translation", im.name);
-    cam.R_world_to_cam = colmap_quaternion_to_matrix(im.qvec, images_path);
+    try {
+      cam.R_world_to_cam = colmap_quaternion_to_matrix(im.qvec, images_path);
+    } catch (const Error&) {  // the same message, with the image named
+      fail_file(images_path, "image {}: invalid rotation quaternion ({}, {}, {}, {})", im.name, im.qvec[0], im.qvec[1],
+                im.qvec[2], im.qvec[3]);
+    }
     cam.t_world_to_cam = glm::dvec3(im.tvec[0], im.tvec[1], im.tvec[2]);
     if (const std::string why = implausible_camera(cam); !why.empty())
       fail_file(images_path, "image {} (camera {} of {}): {}", im.name, c.id, cameras_path.filename().string(), why);
