@@ -1,6 +1,7 @@
 // d2gs experiment: methods × scenes × view counts × seeds, one run folder each, resumable, run locally in
 // parallel (--jobs) or as a Slurm job array (--emit-slurm, --run-index); `collect` builds the tables and
 // the report from the experiment folder.
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <map>
@@ -94,6 +95,19 @@ int run_experiment_command(const ExperimentOptions& o) {
   }
   if (o.run_index >= static_cast<int>(runs.size()))
     fail("option --run-index {} is outside the experiment's {} runs (0..{})", o.run_index, runs.size(), runs.size() - 1);
+  // Runs trained here need their scenes: a scene folder that is not there would fail every run of it, one
+  // by one, after the folder, logs, tables and report were made (--list, --collect and --emit-slurm, which
+  // may run where the data is not mounted, do not need them).
+  if (!o.list && !o.collect && !o.emit_slurm)
+    for (const auto& scene : config.scenes) {
+      std::error_code ec;
+      const bool needed = std::any_of(runs.begin(), runs.end(), [&](const experiment::RunSpec& r) {
+        return r.scene == scene.name && (o.run_index < 0 || r.index == o.run_index);
+      });
+      if (needed && !fs::is_directory(scene.source, ec))
+        fail_file(config.file, "scene '{}': its source {} is not a folder here (check data_root, or --data-root)",
+                  scene.name, scene.source);
+    }
   // --list changes nothing; the other modes keep the folder's state the experiment file's.
   if (!o.config.empty() && !o.list && (o.run_index < 0 || !fs::exists(out / "experiment.json")))
     experiment::write_experiment_state(out, config, runs);

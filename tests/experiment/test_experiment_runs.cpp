@@ -130,6 +130,18 @@ TEST(ExperimentCli, ModesOtherExperimentsAndRunListsAreChecked) {
   EXPECT_FALSE(fs::exists(dir / "inj/slurm"));
   EXPECT_NE(experiment(config, dir / "s2", "--emit-slurm --slurm-gpus -3", &code).find("--slurm-gpus must be ≥ 0"),
             std::string::npos);
+  // A scene folder that is not there: one line before any run is started or any folder made.
+  auto missing = nlohmann::json::parse(read_file(config));
+  missing["scenes"][0]["source"] = "nerf_llff_data/no_such_scene";
+  write_file_atomic(dir / "missing.json", missing.dump());
+  const std::string absent = experiment(dir / "missing.json", dir / "absent", "", &code);
+  EXPECT_EQ(code, 1) << absent;
+  EXPECT_NE(absent.find("scene 'fern': its source " +
+                        fs::absolute(test::shared_data() / "nerf_llff_data/no_such_scene").lexically_normal().string() +
+                        " is not a folder here"),
+            std::string::npos)
+      << absent;
+  EXPECT_FALSE(fs::exists(dir / "absent"));
 }
 
 TEST(ExperimentRuns, TwoMethodsTwoSeedsInParallelThenSkipped) {
