@@ -592,6 +592,7 @@ Scene load_colmap_scene(const fs::path& root, const SceneLoadOptions& options) {
     cam.image_path = root / folder.folder / im.name;
     {
       std::error_code ec;
+      if (fs::exists(cam.image_path, ec)) require_regular_file(cam.image_path);  // a pipe or folder: said so
       if (!fs::is_regular_file(cam.image_path, ec))
         fail_file(cam.image_path, "image listed in {} not found", images_path.string());
     }
