@@ -485,19 +485,19 @@ std::string fingerprint_difference(const nlohmann::json& recorded, const nlohman
 }  // namespace
 
 void validate(const TrainingGeometryOptions& o) {
-  const auto in = [](double v, double lo, double hi, bool lo_open, const char* flag, const char* range) {
-    if (!std::isfinite(v) || (lo_open ? !(v > lo) : !(v >= lo)) || !(v <= hi))
+  // v finite, above lo (or at it unless lo_open) and below hi (or at it unless hi_open).
+  const auto in = [](double v, double lo, bool lo_open, double hi, bool hi_open, const char* flag, const char* range) {
+    if (!std::isfinite(v) || (lo_open ? !(v > lo) : !(v >= lo)) || (hi_open ? !(v < hi) : !(v <= hi)))
       fail("option {} must be {} (got {})", flag, range, v);
   };
   if (o.max_features < 1) fail("option --max-features must be ≥ 1 (got {})", o.max_features);
-  in(o.sift_contrast_threshold, 0.0, 1.0, true, "--sift-contrast", "in (0, 1]");
-  in(o.match.ratio, 0.0, 1.0, true, "--match-ratio", "in (0, 1]");
-  in(o.match.epipolar_px, -1e300, 1e6, false, "--epipolar-px", "a number of pixels (≤ 0: automatic)");
-  in(o.triangulation.max_reprojection_px, 0.0, 1e6, true, "--max-reprojection-px", "> 0");
-  in(o.triangulation.min_angle_deg, 0.0, 90.0, false, "--min-angle", "in [0, 90) degrees");
-  if (!(o.triangulation.min_angle_deg < 90.0)) fail("option --min-angle must be in [0, 90) degrees (got {})", o.triangulation.min_angle_deg);
+  in(o.sift_contrast_threshold, 0.0, true, 1.0, false, "--sift-contrast", "in (0, 1]");
+  in(o.match.ratio, 0.0, true, 1.0, false, "--match-ratio", "in (0, 1]");
+  in(o.match.epipolar_px, -1e300, false, 1e6, false, "--epipolar-px", "a number of pixels (≤ 0: automatic)");
+  in(o.triangulation.max_reprojection_px, 0.0, true, 1e6, false, "--max-reprojection-px", "> 0");
+  in(o.triangulation.min_angle_deg, 0.0, false, 90.0, true, "--min-angle", "in [0, 90) degrees");
   if (o.stereo_neighbors < 1) fail("option --stereo-neighbors must be ≥ 1 (got {})", o.stereo_neighbors);
-  in(o.fusion.relative_tolerance, 0.0, 1.0, true, "--fusion-tolerance", "in (0, 1]");
+  in(o.fusion.relative_tolerance, 0.0, true, 1.0, false, "--fusion-tolerance", "in (0, 1]");
   validate(o.patch_match);
   validate(o.patch_match_fusion);
 }

@@ -74,16 +74,6 @@ std::vector<LlffPose> parse_llff_poses(const NpyArray& array, const fs::path& so
     if (p.height <= 0 || p.width <= 0 || p.focal <= 0)
       fail_file(source, "row {}: height, width and focal must be positive, found {}, {}, {}", k,
                 p.height, p.width, p.focal);
-    // Finite is not enough (implausible_camera, scene/camera.hpp), checked here at the poses' own size.
-    Camera at_full;
-    at_full.width = static_cast<int>(std::lround(std::min(p.width, 1e9)));
-    at_full.height = static_cast<int>(std::lround(std::min(p.height, 1e9)));
-    at_full.fx = at_full.fy = p.focal;
-    at_full.cx = 0.5 * at_full.width;
-    at_full.cy = 0.5 * at_full.height;
-    at_full.R_world_to_cam = p.R_world_to_cam;
-    at_full.t_world_to_cam = -(p.R_world_to_cam * p.center);
-    if (const std::string why = implausible_camera(at_full); !why.empty()) fail_file(source, "row {}: {}", k, why);
     poses.push_back(p);
   }
   return poses;
@@ -115,6 +105,8 @@ Scene load_llff_scene(const fs::path& root, const SceneLoadOptions& options) {
     cam.cy = 0.5 * cam.height;
     cam.R_world_to_cam = p.R_world_to_cam;
     cam.t_world_to_cam = -(p.R_world_to_cam * p.center);
+    // Finite is not enough (scene/camera.hpp); the row is named, as for the checks of parse_llff_poses.
+    if (const std::string why = implausible_camera(cam); !why.empty()) fail_file(poses_path, "row {}: {}", k, why);
     // The focal length is the poses' at 1/R: an image of another size would be trained with wrong intrinsics.
     if (std::abs(cam.width - p.width / r) > 1.0 || std::abs(cam.height - p.height / r) > 1.0)
       fail_file(cam.image_path,
