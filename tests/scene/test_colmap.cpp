@@ -290,7 +290,7 @@ TEST(Colmap, AspectMismatchBetweenCameraAndImageIsAnError) {
   EXPECT_NEAR(s.cameras[0].fy, 3000.0 * 378 / 3024, 1e-9);
 }
 
-TEST(Colmap, ImagesRefersToUnknownCameraOrDuplicateName) {
+TEST(Colmap, ImagesRefersToUnknownCameraOrDuplicateNameOrId) {
   const auto dir = test::scratch_dir();
   const auto root = test::make_room_copy(dir);
   auto model = read_colmap_model(root / "sparse" / "0");
@@ -301,6 +301,12 @@ TEST(Colmap, ImagesRefersToUnknownCameraOrDuplicateName) {
   model.images[5].name = model.images[6].name;
   write_colmap_binary(model, root / "sparse" / "0");
   expect_error([&] { load_scene(root); }, {"images.bin", "twice"});
+  model = read_colmap_model(test::room_dir() / "sparse" / "0");
+  model.images[5].id = model.images[6].id;
+  write_colmap_binary(model, root / "sparse" / "0");
+  expect_error([&] { load_scene(root); },
+               {"images.bin", fmt::format("image id {} appears twice", model.images[6].id), model.images[5].name,
+                model.images[6].name});
   model = read_colmap_model(test::room_dir() / "sparse" / "0");
   model.cameras.push_back(model.cameras[0]);
   write_colmap_binary(model, root / "sparse" / "0");

@@ -577,6 +577,13 @@ Scene load_colmap_scene(const fs::path& root, const SceneLoadOptions& options) {
   std::sort(images.begin(), images.end(), [](const ColmapImage& a, const ColmapImage& b) { return a.name < b.name; });
   for (std::size_t i = 1; i < images.size(); ++i)
     if (images[i].name == images[i - 1].name) fail_file(images_path, "image name {} appears twice", images[i].name);
+  // points3D's tracks name images by id: two images of one id would make every track through it ambiguous.
+  {
+    std::unordered_map<std::uint32_t, const std::string*> names_by_id;
+    for (const auto& im : images)
+      if (const auto [it, fresh] = names_by_id.emplace(im.id, &im.name); !fresh)
+        fail_file(images_path, "image id {} appears twice ({} and {})", im.id, *it->second, im.name);
+  }
 
   const auto folder = choose_image_folder(root, options.resolution, options.image_source);
   scene.images_folder = folder.folder;
