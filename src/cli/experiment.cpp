@@ -16,6 +16,8 @@
 #include "d2gs/experiment/run_state.hpp"
 #include "d2gs/experiment/runner.hpp"
 #include "d2gs/experiment/slurm.hpp"
+#include "d2gs/scene/split.hpp"
+#include "d2gs/train/config.hpp"
 
 namespace d2gs::cli {
 namespace {
@@ -108,6 +110,27 @@ int run_experiment_command(const ExperimentOptions& o) {
         fail_file(config.file, "scene '{}': its source {} is not a folder here (check data_root, or --data-root)",
                   scene.name, scene.source);
     }
+  // ... and the views they ask for: a view count the scene cannot give (or explicit views it lacks) would
+  // also fail each of its runs in turn. Scene metadata only (cameras; no image decoded), once per scene and
+  // load options.
+  if (!o.list && !o.collect && !o.emit_slurm) {
+    std::map<std::string, Scene> scenes;
+    for (const auto& r : runs) {
+      if (o.run_index >= 0 && r.index != o.run_index) continue;
+      try {
+        TrainConfig c;
+        update_from_json(c, r.train_config);
+        const SceneLoadOptions load = scene_load_options(c);
+        const std::string key = fmt::format("{}|{}|{}|{}", c.source, load.resolution, to_string(load.image_source),
+                                            c.white_background);
+        auto it = scenes.find(key);
+        if (it == scenes.end()) it = scenes.emplace(key, load_scene(c.source, load)).first;
+        make_split(it->second, split_options(c));
+      } catch (const Error& e) {
+        fail_file(config.file, "run {} ({}): {}", r.index, r.id(), e.what());
+      }
+    }
+  }
   // --list changes nothing; the other modes keep the folder's state the experiment file's.
   if (!o.config.empty() && !o.list && (o.run_index < 0 || !fs::exists(out / "experiment.json")))
     experiment::write_experiment_state(out, config, runs);

@@ -142,6 +142,19 @@ TEST(ExperimentCli, ModesOtherExperimentsAndRunListsAreChecked) {
             std::string::npos)
       << absent;
   EXPECT_FALSE(fs::exists(dir / "absent"));
+  // More views than the scene has outside its test views (fern: 20 images, 17 of them not test views): one
+  // line naming the experiment file and the run, before any folder is made; --list still lists the runs.
+  auto many = nlohmann::json::parse(read_file(config));
+  many["views"] = {3, 30};
+  write_file_atomic(dir / "many.json", many.dump());
+  const std::string too_many = experiment(dir / "many.json", dir / "many", "", &code);
+  EXPECT_EQ(code, 1) << too_many;
+  EXPECT_NE(too_many.find("many.json: run 2 (fern__30v__3dgs__seed0): --n-views 30: only 17 training views are available"),
+            std::string::npos)
+      << too_many;
+  EXPECT_FALSE(fs::exists(dir / "many"));
+  experiment(dir / "many.json", dir / "many", "--list", &code);
+  EXPECT_EQ(code, 0);
 }
 
 TEST(ExperimentRuns, TwoMethodsTwoSeedsInParallelThenSkipped) {
