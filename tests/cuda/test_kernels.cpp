@@ -427,6 +427,49 @@ TEST(EmulatedKernels, TilesOfOneGaussianEach) {
   }
 }
 
+// 2 200 Gaussians that each cover the whole of a 16384 x 16384 image (1 048 576 tiles): 2.3e9 (Gaussian, tile)
+// pairs, more than the int tile lists index. Both backends refuse the frame with one error (nothing that size
+// is allocated first), and the projected radius (3 sigma = 1e8 px) is held at 2^24 rather than converted
+// past an int's range.
+TEST(EmulatedKernels, AFrameWithMorePairsThanTheTileListsIndexIsRefused) {
+  const int side = 16384;
+  render::CameraParams<float> cam;
+  cam.width = cam.height = side;
+  cam.fx = cam.fy = float(side);
+  cam.cx = cam.cy = 0.5f * side;
+  render::set_jacobian_limits(cam);
+  TestModel<float> m;
+  m.sh_degree = 0;
+  const std::size_t n = 2200;
+  for (std::size_t i = 0; i < n; ++i) {
+    m.means.insert(m.means.end(), {0.001f * float(i % 7), -0.001f * float(i % 5), 10.0f});
+    m.log_scales.insert(m.log_scales.end(), {10.0f, 10.0f, 10.0f});
+    m.quats.insert(m.quats.end(), {1.0f, 0.0f, 0.0f, 0.0f});
+    m.opacity_logits.push_back(4.0f);
+    m.sh_dc.insert(m.sh_dc.end(), {0.1f, 0.2f, 0.3f});
+    m.multiplier.push_back(1.0f);
+  }
+  const StageOptions o;
+  render::cpu::Projected<float> proj;
+  render::cpu::project_forward<float>(m.view(), nullptr, cam, proj);
+  EXPECT_EQ(proj.radii[0], 1 << 24);
+  try {
+    cpu_forward(m.view(), nullptr, cam, o);
+    ADD_FAILURE() << "the CPU binning took the frame";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("(Gaussian, tile) pairs of the 16384x16384 image"), std::string::npos)
+        << e.what();
+  }
+  for (auto& runner : emulated_runners()) {
+    try {
+      runner->forward(m.view(), nullptr, cam, o);
+      ADD_FAILURE() << "the kernels took the frame";
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find("(Gaussian, tile) pairs"), std::string::npos) << e.what();
+    }
+  }
+}
+
 TEST(EmulatedKernels, EmptyModelGivesEmptyTiles) {
   const auto cam = test_camera<float>(40, 30, 1);
   TestModel<float> m;

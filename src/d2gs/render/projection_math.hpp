@@ -175,7 +175,8 @@ D2GS_HD bool project_gaussian(const T mean[3], const T log_scale[3], const T qua
   conic[2] = a * inv_det;
   const T mid = T(0.5) * (a + c);
   const T lambda_max = mid + hd_sqrt(hd_max(T(0.1), mid * mid - det));
-  radius = int(hd_ceil(T(3) * hd_sqrt(lambda_max)));
+  // Capped far beyond any image (2^24 px) so that a huge (or infinite) extent converts to int defined.
+  radius = int(hd_min(hd_ceil(T(3) * hd_sqrt(lambda_max)), T(16777216)));
   mean2d[0] = cam.fx * st.pc[0] * inv_z + cam.cx - T(0.5);
   mean2d[1] = cam.fy * st.pc[1] * inv_z + cam.cy - T(0.5);
   depth = z;

@@ -6,9 +6,20 @@
 #include <cstdint>
 #include <vector>
 
+#include "d2gs/core/error.hpp"
 #include "d2gs/render/projection_math.hpp"
 
 namespace d2gs::render::cpu {
+
+// The tile lists index (Gaussian, tile) pairs with 32-bit ints (both backends). A frame that needs more is
+// refused with this error instead of overflowing them: its Gaussians are far too large for the image.
+inline constexpr std::int64_t kMaxIntersections = 0x7fffffff;
+inline void check_intersection_count(std::int64_t pairs, int width, int height) {
+  if (pairs > kMaxIntersections)
+    fail("render: the Gaussians cover {} (Gaussian, tile) pairs of the {}x{} image, more than the {} the tile "
+         "lists can index (a model of huge or far too many overlapping Gaussians; check its scales, or render smaller)",
+         pairs, width, height, kMaxIntersections);
+}
 
 // Read-only view of a model's parameters (layout of d2gs::Gaussians; sh_rest has
 // (model_sh_degree+1)^2-1 coefficients per Gaussian, RGB innermost).

@@ -279,6 +279,15 @@ private:
     c.counts = counts_.data();
     c.offsets = offsets_.data();
     backend_.template launch<TileCountKernel>(blocks, kBlockThreads, c);
+    // The int scan could overflow only where every Gaussian covering every tile would: there the counts
+    // are summed on the host first (a frame that needs more pairs than the tile lists can index is refused).
+    if (static_cast<std::int64_t>(n_) * tiles > cpu::kMaxIntersections) {
+      std::vector<int> counts;
+      backend_.download(counts, counts_, n_);
+      std::int64_t total = 0;
+      for (int k : counts) total += k;
+      cpu::check_intersection_count(total, camera_.width, camera_.height);
+    }
     kernels::inclusive_scan(backend_, offsets_.data(), n, scan_levels_);
 
     const int m = n > 0 ? backend_.read(offsets_, n_ - 1) : 0;  // the one value read back
