@@ -226,6 +226,32 @@ TEST(Imr, StorageModesAgree) {
   EXPECT_NEAR(mixture_transport(a, b, o).transport_cost, d, 1e-6 * d);
 }
 
+// A transport whose matrices exceed the machine's memory (10^6 × 10^6 components: terabytes under every
+// storage) is refused before anything that size is allocated, naming the sizes and the way out.
+TEST(Imr, ATransportLargerThanMemoryIsRefusedFirst) {
+  GaussianMixture a, b;
+  for (GaussianMixture* g : {&a, &b}) {
+    g->means.resize(1000000);
+    g->covariances.resize(1000000);
+    g->weights.assign(1000000, 1e-6);
+  }
+  ImrOptions o;
+  for (const CostStorage storage : {CostStorage::StoredFloat, CostStorage::StoredDouble, CostStorage::OnTheFly})
+    for (const SinkhornMethod method : {SinkhornMethod::LogDomain, SinkhornMethod::StabilizedKernel}) {
+      o.storage = storage;
+      o.sinkhorn.method = method;
+      if (storage == CostStorage::OnTheFly && method == SinkhornMethod::LogDomain) continue;  // nothing n × m kept
+      try {
+        mixture_transport(a, b, o);
+        ADD_FAILURE() << to_string(storage) << " " << to_string(method);
+      } catch (const Error& e) {
+        const std::string what = e.what();
+        EXPECT_NE(what.find("1000000 × 1000000 components"), std::string::npos) << what;
+        EXPECT_NE(what.find("fewer --samples"), std::string::npos) << what;
+      }
+    }
+}
+
 TEST(Imr, MetricFromDistances) {
   EXPECT_DOUBLE_EQ(imr_from_distances({2.0}), std::log(2.0));
   EXPECT_DOUBLE_EQ(imr_from_distances({1.0, 2.0, 3.0}), std::log(14.0 / 6.0));

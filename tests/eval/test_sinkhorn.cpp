@@ -4,7 +4,9 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <numeric>
+#include <string>
 #include <random>
 
 #include <gtest/gtest.h>
@@ -306,6 +308,35 @@ TEST(Sinkhorn, RejectsBadInput) {
   o.epsilon = 0;
   EXPECT_THROW(sinkhorn(p.a, p.b, cost, o), Error);
   EXPECT_THROW(DenseCostMatrix<double>(3, 3, std::vector<double>(8)), Error);
+  // An epsilon schedule of millions of stages (a factor next to 1), or one that starts at infinity (a float
+  // cost entry overflowed), is refused before any iteration, with both solvers.
+  o.epsilon = 1e-3;
+  o.epsilon_scaling = true;
+  for (const SinkhornMethod method : {SinkhornMethod::LogDomain, SinkhornMethod::StabilizedKernel}) {
+    o.method = method;
+    o.epsilon_factor = 0.9999999999999999;
+    EXPECT_THROW(
+        {
+          try {
+            sinkhorn(p.a, p.b, cost, o);
+          } catch (const Error& e) {
+            EXPECT_NE(std::string(e.what()).find("stages, more than 1000"), std::string::npos) << e.what();
+            throw;
+          }
+        },
+        Error);
+    o.epsilon_factor = 0.5;
+    EXPECT_NO_THROW(sinkhorn(p.a, p.b, cost, o));  // ~10 stages: solved
+    std::vector<double> overflowed = p.c;
+    overflowed[3] = std::numeric_limits<double>::infinity();
+    const DenseCostMatrix<double> inf_cost(p.n, p.m, overflowed);
+    try {
+      sinkhorn(p.a, p.b, inf_cost, o);
+      ADD_FAILURE() << "an infinite cost entry was taken";
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find("beyond the float range"), std::string::npos) << e.what();
+    }
+  }
 }
 
 // A cost with the structure of trained models: two dense clusters of unequal mass plus a few far outliers

@@ -8,6 +8,8 @@
 #include <cstdint>
 #include <limits>
 
+#include <unistd.h>
+
 #include <fmt/format.h>
 
 #include "d2gs/core/error.hpp"
@@ -28,6 +30,20 @@ const char* to_string(CostStorage storage) {
 }
 
 namespace {
+
+// Bytes a solve keeps per cost entry: the stored cost (row-major, and column-major too for the log-domain
+// solver) and the stabilised-kernel solver's float kernel.
+double bytes_per_cost_entry(CostStorage storage, bool kernel) {
+  const double value = storage == CostStorage::StoredDouble ? 8.0 : 4.0;
+  const double copies = storage == CostStorage::OnTheFly ? 0.0 : kernel ? 1.0 : 2.0;
+  return value * copies + (kernel ? 4.0 : 0.0);
+}
+
+double physical_memory_bytes() {
+  const long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGE_SIZE);
+  return pages > 0 && page > 0 ? static_cast<double>(pages) * static_cast<double>(page)
+                               : std::numeric_limits<double>::infinity();
+}
 
 // out[j] = (‖p − X_j‖² + clamp(¼(Σ_k s_k A_k[j] + s_c + A_c[j]), lo, hi)) · inv_scale.
 // With the source fixed (a row) s = Σ_i² features and A = Σ_j⁻¹ features; with the target fixed (a column)
@@ -234,9 +250,17 @@ CostSpan MixtureCost::column(std::size_t j, double* scratch) const {
 TransportResult mixture_transport(const GaussianMixture& source, const GaussianMixture& target,
                                   const ImrOptions& options) {
   const auto start = std::chrono::steady_clock::now();
+  const bool kernel = options.sinkhorn.method == SinkhornMethod::StabilizedKernel;
+  // A solve whose matrices cannot fit in memory is refused before they are filled (the kernel would kill it).
+  const double entries = static_cast<double>(source.size()) * static_cast<double>(target.size());
+  const double need = entries * bytes_per_cost_entry(options.storage, kernel), have = physical_memory_bytes();
+  if (need > have)
+    fail("imr: a transport of {} × {} components keeps {:.1f} GiB of matrices ({} cost{}), more than this machine's "
+         "{:.1f} GiB of memory: take fewer --samples{}",
+         source.size(), target.size(), need / 1073741824.0, to_string(options.storage), kernel ? ", stabilised kernel" : "",
+         have / 1073741824.0, options.storage == CostStorage::OnTheFly ? "" : " (or --cost on-the-fly)");
   const MixtureCost cost(source, target, options.cost);
   SinkhornResult solved;
-  const bool kernel = options.sinkhorn.method == SinkhornMethod::StabilizedKernel;
   switch (options.storage) {
     // The stabilised-kernel solver reads the cost by rows only: no column-major copy.
     case CostStorage::StoredFloat:

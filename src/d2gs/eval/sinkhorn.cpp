@@ -1077,6 +1077,14 @@ SinkhornResult sinkhorn(std::span<const double> a, std::span<const double> b, co
     if (!(options.epsilon_factor > 0.0 && options.epsilon_factor < 1.0))
       fail("sinkhorn: epsilon factor must be in (0, 1), got {}", options.epsilon_factor);
     double e = options.epsilon_start > 0.0 ? options.epsilon_start : max_cost_entry(cost, threads);
+    if (!std::isfinite(e))
+      fail("sinkhorn: the epsilon schedule starts at {} (a cost entry beyond the float range: the components lie too "
+           "far apart for an unnormalised cost)", e);
+    // A factor next to 1 (or a start far above epsilon) would make millions of stages: refused up front.
+    const double stages = std::ceil(std::log(e / options.epsilon) / -std::log(options.epsilon_factor));
+    if (stages > kMaxEpsilonStages)
+      fail("sinkhorn: epsilon scaling from {:.4g} to {:.4g} by a factor of {} takes {:.0f} stages, more than {} "
+           "(choose a smaller factor)", e, options.epsilon, options.epsilon_factor, stages, kMaxEpsilonStages);
     for (; e > options.epsilon * (1.0 + 1e-9); e *= options.epsilon_factor) epsilons.push_back(e);
   }
   epsilons.push_back(options.epsilon);

@@ -86,6 +86,8 @@ enum class SinkhornMethod { LogDomain, StabilizedKernel };
 inline constexpr int kSinkhornRevision = 3;
 const char* to_string(SinkhornMethod method);
 
+inline constexpr int kMaxEpsilonStages = 1000;
+
 struct SinkhornOptions {
   double epsilon = 0.1;         // ε, in the cost's units (POT's reg)
   int max_iterations = 10000;   // one iteration = one φ update + one ψ update (all ε stages together)
@@ -98,6 +100,7 @@ struct SinkhornOptions {
   // ε-scaling: solve first with ε_start, then ε_start·factor, ... down to ε, warm-starting the potentials
   // (kept in cost units f = εφ, g = εψ across stages). Intermediate stages stop at
   // max(tolerance, stage_tolerance); the last one at `tolerance`.
+  // More stages than kMaxEpsilonStages (a factor next to 1) are refused.
   bool epsilon_scaling = false;
   double epsilon_start = 0.0;   // 0: max_ij C_ij (one extra pass over the cost)
   double epsilon_factor = 0.5;
