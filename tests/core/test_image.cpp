@@ -1,3 +1,6 @@
+#include <string>
+#include <utility>
+
 #include <gtest/gtest.h>
 
 #include "d2gs/core/atomic_file.hpp"
@@ -59,6 +62,42 @@ TEST(Image, HeaderSizeSkipsStrayBytesBetweenJpegSegmentsAsTheDecoderDoes) {
   const ImageSize size = read_image_size(finding);
   EXPECT_EQ(size.width, image.width);
   EXPECT_EQ(size.height, image.height);
+}
+
+// A few kilobytes can declare gigapixels (a decompression bomb): a frame above kMaxImagePixels is refused
+// from its header, naming the file and the size, by the decoder and by the header reader, before libpng or
+// libjpeg allocate anything for it.
+TEST(Image, AFrameAboveThePixelLimitIsRefusedFromItsHeader) {
+  const auto dir = test::scratch_dir();
+  const auto put16 = [](std::string& b, std::size_t at, int v) {
+    b[at] = static_cast<char>(v >> 8);
+    b[at + 1] = static_cast<char>(v & 255);
+  };
+  std::string png = read_file(test::shared_data() / "nerf_llff_data/fern/images_8/image000.png");
+  put16(png, 18, 20000);  // IHDR width and height (big-endian 32-bit at 16 and 20)
+  put16(png, 22, 20000);
+  std::string jpeg = read_file(test::shared_data() / "llff_nex_reprocessed/room/images/img001.JPG");
+  std::size_t sof = 2;  // walk the segments to the frame header (SOF0..SOF2)
+  while (sof + 4 < jpeg.size() && !(static_cast<unsigned char>(jpeg[sof + 1]) >= 0xC0 &&
+                                     static_cast<unsigned char>(jpeg[sof + 1]) <= 0xC2))
+    sof += 2 + ((static_cast<unsigned char>(jpeg[sof + 2]) << 8) | static_cast<unsigned char>(jpeg[sof + 3]));
+  ASSERT_LT(sof + 9, jpeg.size());
+  put16(jpeg, sof + 5, 20000);  // height, then width
+  put16(jpeg, sof + 7, 20000);
+  for (const auto& [name, bytes] : {std::pair{"bomb.png", png}, std::pair{"bomb.jpg", jpeg}}) {
+    write_file_atomic(dir / name, bytes);
+    const std::string expected = (dir / name).string() + ": image is 20000x20000: more than the 268435456 pixels d2gs decodes";
+    for (int reader = 0; reader < 3; ++reader) {
+      try {
+        if (reader == 0) read_image(dir / name);
+        if (reader == 1) decode_image(bytes, dir / name);
+        if (reader == 2) read_image_size(dir / name);
+        ADD_FAILURE() << name << " taken by reader " << reader;
+      } catch (const Error& e) {
+        EXPECT_EQ(std::string(e.what()), expected) << reader;
+      }
+    }
+  }
 }
 
 TEST(Image, RgbOrderAndAreaResize) {

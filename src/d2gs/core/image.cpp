@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstdint>
 #include <fstream>
+#include <optional>
 #include <string>
 #include <utility>
 
@@ -156,10 +157,10 @@ std::string jpeg_problem(std::string_view bytes) {
 
 // The frame size from libjpeg's own header reader, which skips stray bytes and fill the way the decoder
 // does (a hand-written marker walk disagreed with it on damaged streams). Reads only up to the first
-// scan. Empty when the header is read, else libjpeg's complaint; only plain objects live across setjmp.
-std::string jpeg_header_size(const fs::path& path, ImageSize& size) {
-  std::FILE* file = std::fopen(path.c_str(), "rb");
-  if (file == nullptr) return "cannot open the file";
+// scan, from the source `set_source` installs. Empty when the header is read, else libjpeg's complaint;
+// only plain objects live across setjmp.
+template <class SetSource>
+std::string jpeg_frame_size(const SetSource& set_source, ImageSize& size) {
   jpeg_decompress_struct info{};
   JpegErrors errors{};
   info.err = jpeg_std_error(&errors.mgr);
@@ -167,18 +168,46 @@ std::string jpeg_header_size(const fs::path& path, ImageSize& size) {
   errors.mgr.emit_message = [](j_common_ptr, int) {};  // the decoder judges the data; only the size is read here
   if (setjmp(errors.jump)) {
     jpeg_destroy_decompress(&info);
-    std::fclose(file);
     return errors.first_message.empty() ? std::string("undecodable JPEG header") : errors.first_message;
   }
   jpeg_create_decompress(&info);
-  jpeg_stdio_src(&info, file);
+  set_source(info);
   jpeg_read_header(&info, TRUE);
   const JDIMENSION w = info.image_width, h = info.image_height;
   jpeg_destroy_decompress(&info);
-  std::fclose(file);
   if (w == 0 || h == 0 || w > INT32_MAX || h > INT32_MAX) return "zero or huge frame size";
   size = {static_cast<int>(w), static_cast<int>(h)};
   return {};
+}
+
+std::string jpeg_header_size(const fs::path& path, ImageSize& size) {
+  std::FILE* file = std::fopen(path.c_str(), "rb");
+  if (file == nullptr) return "cannot open the file";
+  const std::string problem = jpeg_frame_size([&](jpeg_decompress_struct& info) { jpeg_stdio_src(&info, file); }, size);
+  std::fclose(file);
+  return problem;
+}
+
+// The declared frame of PNG or JPEG bytes, when their header can be read (else the decoder's checks speak).
+std::optional<ImageSize> declared_size(std::string_view bytes, bool jpeg) {
+  const auto* p = reinterpret_cast<const unsigned char*>(bytes.data());
+  if (!jpeg) {
+    if (bytes.size() < 24 || !std::equal(p + 12, p + 16, reinterpret_cast<const unsigned char*>("IHDR")))
+      return std::nullopt;
+    const auto w = be32(p + 16), h = be32(p + 20);
+    if (w == 0 || h == 0 || w > INT32_MAX || h > INT32_MAX) return std::nullopt;
+    return ImageSize{static_cast<int>(w), static_cast<int>(h)};
+  }
+  ImageSize size;
+  const std::string problem = jpeg_frame_size(
+      [&](jpeg_decompress_struct& info) { jpeg_mem_src(&info, p, static_cast<unsigned long>(bytes.size())); }, size);
+  if (!problem.empty()) return std::nullopt;
+  return size;
+}
+
+void check_frame_size(ImageSize size, const fs::path& source) {
+  if (static_cast<std::int64_t>(size.width) * size.height > kMaxImagePixels)
+    fail_file(source, "image is {}x{}: more than the {} pixels d2gs decodes", size.width, size.height, kMaxImagePixels);
 }
 
 ImageReadObserver& image_read_observer() {
@@ -204,6 +233,7 @@ Image decode_image(std::string_view bytes, const fs::path& source) {
   // a file with "DICM" at byte 128: fuzz/corpus/fuzz_image/dicom-magic-at-128.bin).
   const bool jpeg = is_jpeg(bytes);
   if (!jpeg && !is_png(bytes)) fail_file(source, "not a PNG or JPEG file (the image formats d2gs reads)");
+  if (const auto size = declared_size(bytes, jpeg)) check_frame_size(*size, source);
   if (jpeg) {
     const std::string problem = jpeg_problem(bytes);
     if (!problem.empty()) fail_file(source, "corrupt or truncated JPEG ({})", problem);
@@ -237,11 +267,14 @@ ImageSize read_image_size(const fs::path& path) {
       fail_file(path, "corrupt PNG header");
     const auto w = be32(head + 16), h = be32(head + 20);
     if (w == 0 || h == 0 || w > 1u << 16 || h > 1u << 16) fail_file(path, "corrupt PNG header (size {}x{})", w, h);
-    return {static_cast<int>(w), static_cast<int>(h)};
+    size = {static_cast<int>(w), static_cast<int>(h)};
+    check_frame_size(size, path);
+    return size;
   }
   if (got >= 4 && head[0] == 0xFF && head[1] == 0xD8) {
     const std::string problem = jpeg_header_size(path, size);
     if (!problem.empty()) fail_file(path, "corrupt JPEG header ({})", problem);
+    check_frame_size(size, path);
     return size;
   }
   const Image decoded = read_image(path);

@@ -2,6 +2,7 @@
 // Images in memory: float32, interleaved channels, row-major (height x width x channels), values in
 // [0, 1]. File I/O goes through OpenCV's codecs (PNG, JPEG, ...); colour order in memory is RGB(A).
 #include <cstddef>
+#include <cstdint>
 #include <filesystem>
 #include <functional>
 #include <string_view>
@@ -29,6 +30,11 @@ struct ImageSize {
   int width = 0;
   int height = 0;
 };
+
+// The largest frame d2gs decodes (2^28 pixels, e.g. 16384 x 16384; a 200-megapixel photo fits). A larger
+// declared size (a few kilobytes of PNG or JPEG can declare gigapixels) is refused from the header, before
+// any pixel memory is taken, by read_image, decode_image and read_image_size.
+inline constexpr std::int64_t kMaxImagePixels = std::int64_t{1} << 28;
 
 // Called with the path of every image file read_image() decodes (nullptr: none). Lets tests prove that a
 // command reads only the views it may use (the sparse-view protocol: no test view in training or
