@@ -82,7 +82,7 @@ TEST(Methods, Gs3dHasNoHooks) {
   // A checkpoint holding state it does not keep is refused.
   MethodState s;
   s.floats["density_cache"] = {{0.5f}};
-  EXPECT_EQ(test::error_of([&] { m->check_state(s, {}); }), "it holds state 'density_cache', which --method 3dgs does not keep");
+  EXPECT_EQ(test::error_of([&] { m->check_state(s, {}, 0); }), "it holds state 'density_cache', which --method 3dgs does not keep");
 }
 
 TEST(Methods, DropGaussianIsItsMaskAndRate) {
@@ -177,15 +177,22 @@ TEST(Methods, D2gsChecksItsCheckpointState) {
   MethodState s;
   s.floats["density_cache"] = {std::vector<float>(15, 0.5f)};
   s.bytes["dafe_masks"] = {std::vector<std::uint8_t>(48, 1), {}, std::vector<std::uint8_t>(48, 0)};
-  EXPECT_EQ(test::error_of([&] { m->check_state(s, run); }), "");
+  EXPECT_EQ(test::error_of([&] { m->check_state(s, run, 15); }), "");
   s.bytes["dafe_masks"].pop_back();
-  EXPECT_EQ(test::error_of([&] { m->check_state(s, run); }), "it holds 2 DAFE masks for 3 training views");
+  EXPECT_EQ(test::error_of([&] { m->check_state(s, run, 15); }), "it holds 2 DAFE masks for 3 training views");
   s.bytes["dafe_masks"] = {std::vector<std::uint8_t>(48, 1), std::vector<std::uint8_t>(47, 1), {}};
-  EXPECT_EQ(test::error_of([&] { m->check_state(s, run); }), "its DAFE mask of training view 10 has 47 pixels, the view 48");
+  EXPECT_EQ(test::error_of([&] { m->check_state(s, run, 15); }), "its DAFE mask of training view 10 has 47 pixels, the view 48");
   s.bytes["dafe_masks"].clear();  // none yet: allowed
-  EXPECT_EQ(test::error_of([&] { m->check_state(s, run); }), "");
+  EXPECT_EQ(test::error_of([&] { m->check_state(s, run, 15); }), "");
+  // A cache of another size than the checkpoint's model (densification would read past it), unless the
+  // release's out-of-step cache is asked for.
+  ASSERT_TRUE(c.dd_drop.release_density_cache);  // the default, as released
+  EXPECT_EQ(test::error_of([&] { m->check_state(s, run, 16); }), "");
+  c.dd_drop.release_density_cache = false;
+  EXPECT_EQ(test::error_of([&] { make_training_method(c)->check_state(s, run, 16); }),
+            "its density cache holds 15 scores for a model of 16 Gaussians");
   s.bytes["other"] = {};
-  EXPECT_EQ(test::error_of([&] { m->check_state(s, run); }), "it holds state 'other', which --method d2gs does not keep");
+  EXPECT_EQ(test::error_of([&] { m->check_state(s, run, 15); }), "it holds state 'other', which --method d2gs does not keep");
 }
 
 // ---- regularisers (--regularisers): components stacked on any method ----
@@ -467,9 +474,9 @@ TEST(Regularisers, StackMultipliesMultipliersAndNamespacesState) {
   EXPECT_EQ(s, method->state());
   MethodState extra = s;
   extra.bytes["opacity-noise/rng"] = {{1, 2, 3}};
-  EXPECT_EQ(test::error_of([&] { stacked->check_state(extra, {}); }),
+  EXPECT_EQ(test::error_of([&] { stacked->check_state(extra, {}, f.model.size()); }),
             "regulariser opacity-noise: it holds state 'rng', which --method opacity-noise does not keep");
-  EXPECT_EQ(test::error_of([&] { stacked->check_state(s, {}); }), "");
+  EXPECT_EQ(test::error_of([&] { stacked->check_state(s, {}, f.model.size()); }), "");
 }
 
 }  // namespace

@@ -260,7 +260,7 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
     if (const std::string warning = check_resume(resume_from, *checkpoint, s.identity, s.cfg.iterations); !warning.empty())
       spdlog::warn("{}", warning);
     try {
-      s.method->check_state(checkpoint->state.method, s.identity);
+      s.method->check_state(checkpoint->state.method, s.identity, checkpoint->state.model.size());
     } catch (const Error& e) {
       fail_file(resume_from, "cannot resume: {}", e.what());
     }

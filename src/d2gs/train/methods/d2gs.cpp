@@ -42,9 +42,15 @@ public:
     if (d.prior == "stereo") d.prior_kind = PriorKind::Depth;
   }
 
-  void check_state(const MethodState& state, const RunIdentity& run) const override {
+  void check_state(const MethodState& state, const RunIdentity& run, std::size_t gaussians) const override {
     for (const auto& [group, arrays] : state.floats)
       if (group != kDensityCache || arrays.size() > 1) fail("it holds state '{}' ({} arrays), which --method d2gs does not keep", group, arrays.size());
+    // The scores follow the model through densification (one per Gaussian), except with the release's
+    // cache, which is out of step by design (any size).
+    if (const auto cache = state.floats.find(kDensityCache);
+        cache != state.floats.end() && !cache->second.empty() && !cache->second.front().empty() &&
+        !dd_.release_density_cache && cache->second.front().size() != gaussians)
+      fail("its density cache holds {} scores for a model of {} Gaussians", cache->second.front().size(), gaussians);
     for (const auto& [group, arrays] : state.bytes)
       if (group != kDafeMasks) fail("it holds state '{}', which --method d2gs does not keep", group);
     const auto masks = state.bytes.find(kDafeMasks);

@@ -122,9 +122,9 @@ public:
   // written: where two spellings name one run, the method makes them one.
   virtual void describe(TrainConfig& /*as_trained*/, const MethodRun& /*run*/) const {}
   // Throws d2gs::Error naming the problem (the trainer prefixes "CHECKPOINT: cannot resume: ") unless
-  // `state`, read from a checkpoint of a run with identity `run`, fits this method and run. The default:
-  // no state at all.
-  virtual void check_state(const MethodState& state, const RunIdentity& run) const;
+  // `state`, read from a checkpoint of a run with identity `run` whose model has `gaussians` Gaussians,
+  // fits this method and run. The default: no state at all.
+  virtual void check_state(const MethodState& state, const RunIdentity& run, std::size_t gaussians) const;
   // Once the run is set up (scene, split, initial model), before a checkpoint is restored. `config` is
   // what config.json records: a method may resolve its options there (D²GS: --dafe-prior stereo → the
   // folder of the depth maps). `training_geometry` builds or finds the training views' geometry.

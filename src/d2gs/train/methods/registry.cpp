@@ -83,7 +83,7 @@ std::unique_ptr<TrainingMethod> make_training_method(const TrainConfig& config) 
   return stack_methods(std::move(method), std::move(parts));
 }
 
-void TrainingMethod::check_state(const MethodState& state, const RunIdentity&) const {
+void TrainingMethod::check_state(const MethodState& state, const RunIdentity&, std::size_t) const {
   for (const auto& [group, arrays] : state.floats) fail("it holds state '{}', which --method {} does not keep", group, name());
   for (const auto& [group, arrays] : state.bytes) fail("it holds state '{}', which --method {} does not keep", group, name());
 }

@@ -25,12 +25,12 @@ public:
     for (const auto& [n, p] : parts_) p->describe(as_trained, run);
   }
 
-  void check_state(const MethodState& state, const RunIdentity& run) const override {
+  void check_state(const MethodState& state, const RunIdentity& run, std::size_t gaussians) const override {
     std::vector<MethodState> split = split_state(state);
-    method_->check_state(split.front(), run);
+    method_->check_state(split.front(), run, gaussians);
     for (std::size_t k = 0; k < parts_.size(); ++k) {
       try {
-        parts_[k].second->check_state(split[k + 1], run);
+        parts_[k].second->check_state(split[k + 1], run, gaussians);
       } catch (const Error& e) {
         fail("regulariser {}: {}", parts_[k].first, e.what());
       }
