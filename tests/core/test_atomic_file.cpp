@@ -1,5 +1,8 @@
 #include <gtest/gtest.h>
+#include <sys/resource.h>
 #include <sys/stat.h>
+
+#include <csignal>
 
 #include <algorithm>
 #include <filesystem>
@@ -7,6 +10,7 @@
 
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
+#include "d2gs/core/image.hpp"
 #include "test_paths.hpp"
 
 namespace d2gs {
@@ -30,6 +34,41 @@ TEST(AtomicFile, ReplacesOnlyOnCommit) {
   write_file_atomic(dir / "out.txt", "new");
   EXPECT_EQ(read_file(dir / "out.txt"), "new");
   EXPECT_EQ(entries(dir), 1u);
+}
+
+// A write the file system refuses part-way (here the process's file size limit, as a full disk would):
+// the output keeps what it held, no temporary is left, and the error names the file. Files and encoded
+// images alike (OpenCV's own file writers did not report a failed close).
+TEST(AtomicFile, AWriteThatFailsPartWayLeavesTheOldFileAndNoTemporary) {
+  const auto dir = test::scratch_dir();
+  write_file_atomic(dir / "out.bin", "old");
+  write_file_atomic(dir / "out.png", "old png");
+  Image noise(600, 400, 3);
+  for (std::size_t i = 0; i < noise.pixels.size(); ++i) noise.pixels[i] = static_cast<float>((i * 7919) % 251) / 250.0f;
+  rlimit saved{};
+  ASSERT_EQ(getrlimit(RLIMIT_FSIZE, &saved), 0);
+  const auto previous = std::signal(SIGXFSZ, SIG_IGN);  // the write fails with EFBIG instead of a signal
+  rlimit small = saved;
+  small.rlim_cur = 64 * 1024;
+  ASSERT_EQ(setrlimit(RLIMIT_FSIZE, &small), 0);
+  std::string first, second;
+  try {
+    write_file_atomic(dir / "out.bin", std::string(1 << 20, 'x'));
+  } catch (const Error& e) {
+    first = e.what();
+  }
+  try {
+    write_image(dir / "out.png", noise);
+  } catch (const Error& e) {
+    second = e.what();
+  }
+  setrlimit(RLIMIT_FSIZE, &saved);
+  std::signal(SIGXFSZ, previous);
+  EXPECT_EQ(first, (dir / "out.bin").string() + ": write failed (disk full?)");
+  EXPECT_EQ(second, (dir / "out.png").string() + ": write failed (disk full?)");
+  EXPECT_EQ(read_file(dir / "out.bin"), "old");
+  EXPECT_EQ(read_file(dir / "out.png"), "old png");
+  EXPECT_EQ(entries(dir), 2u);
 }
 
 TEST(AtomicFile, WriterThatThrowsLeavesNothing) {

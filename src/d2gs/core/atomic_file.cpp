@@ -33,19 +33,31 @@ void ensure_parent(const fs::path& destination) {
   if (ec) fail_file(parent, "cannot create folder: {}", ec.message());
 }
 
-void sync_file(const fs::path& path) {
-  const int fd = ::open(path.c_str(), O_RDONLY);
+// Flushes the written file to the disk. Where the storage reports the data lost (a network or quota file
+// system can say so only now), the temporary goes and the write fails; a file system that cannot sync
+// (EINVAL, EROFS...) keeps the file as written.
+void sync_file(const fs::path& temporary, const fs::path& destination) {
+  const int fd = ::open(temporary.c_str(), O_RDONLY);
   if (fd < 0) return;
-  (void)::fsync(fd);
-  ::close(fd);
+  const int synced = ::fsync(fd), sync_errno = errno;
+  const int closed = ::close(fd), close_errno = errno;
+  const int lost = synced != 0 && (sync_errno == EIO || sync_errno == ENOSPC || sync_errno == EDQUOT) ? sync_errno
+                   : closed != 0 && (close_errno == EIO || close_errno == ENOSPC || close_errno == EDQUOT) ? close_errno
+                                                                                                            : 0;
+  if (lost != 0) {
+    std::error_code ec;
+    fs::remove(temporary, ec);
+    fail_file(destination, "write failed: {}", std::strerror(lost));
+  }
 }
 
 void rename_into_place(const fs::path& temporary, const fs::path& destination) {
   std::error_code ec;
   fs::rename(temporary, destination, ec);
   if (ec) {
+    const std::string why = ec.message();  // before the removal can touch errno
     fs::remove(temporary, ec);
-    fail_file(destination, "cannot write: {}", std::strerror(errno));
+    fail_file(destination, "cannot write: {}", why);
   }
 }
 
@@ -68,10 +80,11 @@ AtomicFile::~AtomicFile() {
 
 void AtomicFile::commit() {
   stream_.flush();
-  const bool ok = static_cast<bool>(stream_);
-  stream_.close();
-  if (!ok) fail_file(destination_, "write failed (disk full?)");
-  sync_file(temporary_);
+  bool ok = static_cast<bool>(stream_);
+  stream_.close();  // the last buffered bytes are written here: a failure sets failbit
+  ok = ok && !stream_.fail();
+  if (!ok) fail_file(destination_, "write failed (disk full?)");  // the destructor removes the temporary
+  sync_file(temporary_, destination_);
   rename_into_place(temporary_, destination_);
   committed_ = true;
 }
@@ -94,7 +107,7 @@ void write_file_atomic_with(const fs::path& path, const std::function<void(const
   }
   std::error_code ec;
   if (!fs::exists(temporary, ec)) fail_file(path, "writer produced no file");
-  sync_file(temporary);
+  sync_file(temporary, path);
   rename_into_place(temporary, path);
 }
 

@@ -11,6 +11,7 @@
 #include <optional>
 #include <string>
 #include <utility>
+#include <vector>
 
 #include <jpeglib.h>
 // jpeglib.h first: jerror.h needs its types.
@@ -309,6 +310,22 @@ Image resize_area_nonzero(const Image& map, int width, int height) {
   return out;
 }
 
+namespace {
+
+// Encodes in memory (format by the path's extension) and writes the bytes atomically, so that every write
+// error is seen (OpenCV's file writers do not report one at close).
+void write_encoded(const fs::path& path, const cv::Mat& m) {
+  std::vector<unsigned char> bytes;
+  try {
+    if (!cv::imencode(path.extension().string(), m, bytes)) fail_file(path, "cannot encode image");
+  } catch (const cv::Exception& e) {
+    fail_file(path, "cannot encode image ({})", e.err);
+  }
+  write_file_atomic(path, std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
+}
+
+}  // namespace
+
 void write_image(const fs::path& path, const Image& image) {
   if (image.channels != 1 && image.channels != 3 && image.channels != 4)
     fail_file(path, "cannot write an image with {} channels", image.channels);
@@ -316,18 +333,14 @@ void write_image(const fs::path& path, const Image& image) {
   to_mat(image).convertTo(m, CV_8U, 255.0);  // saturates: clamps to [0,255] and rounds
   if (image.channels == 3) cv::cvtColor(m, m, cv::COLOR_RGB2BGR);
   if (image.channels == 4) cv::cvtColor(m, m, cv::COLOR_RGBA2BGRA);
-  write_file_atomic_with(path, [&](const fs::path& tmp) {
-    if (!cv::imwrite(tmp.string(), m)) fail_file(path, "cannot encode image");
-  });
+  write_encoded(path, m);
 }
 
 void write_png16(const fs::path& path, const Image& image, float scale) {
   if (image.channels != 1) fail_file(path, "16-bit PNG output takes one channel, got {}", image.channels);
   cv::Mat m;
   to_mat(image).convertTo(m, CV_16U, scale);
-  write_file_atomic_with(path, [&](const fs::path& tmp) {
-    if (!cv::imwrite(tmp.string(), m)) fail_file(path, "cannot encode image");
-  });
+  write_encoded(path, m);
 }
 
 }  // namespace d2gs
