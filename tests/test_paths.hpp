@@ -1,8 +1,10 @@
 #pragma once
 // Paths every test may use, and a scratch folder per test.
+#include <sys/resource.h>
 #include <sys/wait.h>
 
 #include <chrono>
+#include <csignal>
 #include <cstddef>
 #include <cstdio>
 #include <cstdlib>
@@ -57,6 +59,21 @@ inline CommandResult run_cli(const std::string& args) {
   while ((n = std::fread(buffer, 1, sizeof buffer, pipe)) > 0) result.output.append(buffer, n);
   const int status = ::pclose(pipe);
   result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+  return result;
+}
+
+// run_cli with the files the program writes limited to `bytes` each (RLIMIT_FSIZE, SIGXFSZ ignored, both
+// inherited): a write beyond it fails with EFBIG part-way, as on a full disk.
+inline CommandResult run_cli_with_file_size_limit(const std::string& args, std::size_t bytes) {
+  rlimit saved{};
+  ::getrlimit(RLIMIT_FSIZE, &saved);
+  rlimit small = saved;
+  small.rlim_cur = bytes;
+  const auto previous = std::signal(SIGXFSZ, SIG_IGN);
+  ::setrlimit(RLIMIT_FSIZE, &small);
+  CommandResult result = run_cli(args);
+  ::setrlimit(RLIMIT_FSIZE, &saved);
+  std::signal(SIGXFSZ, previous);
   return result;
 }
 

@@ -100,7 +100,8 @@ int run_render(const RenderCommandOptions& o) {
   else
     for (int i = 0; i < static_cast<int>(scene.cameras.size()); ++i) views.push_back(i);
   check_render_outputs(out_dir, scene, views, o);
-  std::filesystem::create_directories(out_dir);
+  OutputSet outputs;  // a render that fails part-way takes back the views it wrote (none was there before)
+  outputs.create_folder(out_dir);
 
   log_device_choice(backend);
   auto rasterizer = render::make_rasterizer(backend);
@@ -115,22 +116,23 @@ int run_render(const RenderCommandOptions& o) {
     const std::string stem = std::filesystem::path(cam.image_name).stem().string();
     Image rgb(cam.width, cam.height, 3);
     std::copy(out.rgb.begin(), out.rgb.end(), rgb.pixels.begin());  // write_image clamps to [0,1]
-    write_image(out_dir / (stem + ".png"), rgb);
+    write_image(outputs.file(out_dir / (stem + ".png")), rgb);
     if (o.alpha) {
       Image a(cam.width, cam.height, 1);
       std::copy(out.alpha.begin(), out.alpha.end(), a.pixels.begin());
-      write_image(out_dir / (stem + "_alpha.png"), a);
+      write_image(outputs.file(out_dir / (stem + "_alpha.png")), a);
     }
     if (o.depth) {
       Image d(cam.width, cam.height, 1);
       for (std::size_t p = 0; p < out.depth.size(); ++p)
         d.pixels[p] = out.alpha[p] > 1e-6f ? out.depth[p] / out.alpha[p] : 0.0f;
-      write_npy_f32(out_dir / (stem + "_depth.npy"),
+      write_npy_f32(outputs.file(out_dir / (stem + "_depth.npy")),
                     {static_cast<std::size_t>(cam.height), static_cast<std::size_t>(cam.width)}, d.pixels);
-      write_png16(out_dir / (stem + "_depth.png"), d, 1000.0f);
+      write_png16(outputs.file(out_dir / (stem + "_depth.png")), d, 1000.0f);
     }
     spdlog::info("render: view {} {} ({}x{})", v, cam.image_name, cam.width, cam.height);
   }
+  outputs.keep();
   return 0;
 }
 

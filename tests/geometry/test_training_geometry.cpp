@@ -224,6 +224,15 @@ TEST(TrainingGeometry, InitCommandWritesTheLayoutAndTheTrainerLoadsItsDepthPrior
   EXPECT_EQ(sparse_stride.exit_code, 1) << sparse_stride.output;
   EXPECT_NE(sparse_stride.output.find("fused no point"), std::string::npos) << sparse_stride.output;
   EXPECT_FALSE(fs::exists(dir / "opt/init.json"));
+  // A write that fails part-way (each file limited to 300 kB: the sparse cloud fits, the depth maps do not,
+  // as on a full disk) takes back what it wrote, so that the next init into the folder is not refused.
+  ASSERT_LT(fs::file_size(dir / "init/sparse/points3D.ply"), 300000u);
+  const auto partial = test::run_cli_with_file_size_limit(
+      fmt::format("init -s '{}' --n-views 3 -r 8 -o '{}' --dense-method sgbm", fern().string(), (dir / "partial").string()),
+      300000);
+  EXPECT_EQ(partial.exit_code, 1) << partial.output;
+  EXPECT_NE(partial.output.find(": write failed"), std::string::npos) << partial.output;
+  EXPECT_FALSE(fs::exists(dir / "partial")) << partial.output;
   // The same folder again: refused before any work, the first geometry left as it was.
   const std::string cloud = read_file(dir / "init/dense/fused.ply");
   const auto again = test::run_cli(

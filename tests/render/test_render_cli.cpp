@@ -49,6 +49,18 @@ TEST(RenderCli, RendersTestViewsWithDepthAndAlpha) {
     ASSERT_EQ(depth.shape, (std::vector<std::size_t>{378, 504}));
     EXPECT_TRUE(std::filesystem::exists(dir / "out" / (std::string(name) + "_depth.png")));
   }
+  // A render that fails part-way (here each file is limited to 400 kB: the first view's PNGs fit, its
+  // 762 kB depth map does not, as on a full disk) takes back what it wrote: no folder is left for the
+  // next render to refuse.
+  const std::string again = "render --model '" + (dir / "model.ply").string() + "' -s '" + fern.string() +
+                            "' -r 8 -o '" + (dir / "partial").string() + "' --depth --alpha";
+  ASSERT_LT(std::filesystem::file_size(dir / "out/image000.png"), 400000u);
+  const auto partial = run_cli_with_file_size_limit(again, 400000);
+  EXPECT_EQ(partial.exit_code, 1) << partial.output;
+  EXPECT_NE(partial.output.find((dir / "partial/image000_depth.npy").string() + ": write failed"), std::string::npos)
+      << partial.output;
+  EXPECT_FALSE(std::filesystem::exists(dir / "partial"));
+  EXPECT_EQ(run_cli(again).exit_code, 0);
   const auto bad = run_cli("render --model '" + (dir / "model.ply").string() + "' -s '" + fern.string() +
                            "' -o '" + (dir / "x").string() + "' --split nope");
   EXPECT_NE(bad.exit_code, 0);

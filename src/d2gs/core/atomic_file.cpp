@@ -89,6 +89,31 @@ void AtomicFile::commit() {
   committed_ = true;
 }
 
+OutputSet::~OutputSet() {
+  if (kept_) return;
+  std::error_code ec;
+  for (auto it = files_.rbegin(); it != files_.rend(); ++it) fs::remove(*it, ec);
+  for (auto it = folders_.rbegin(); it != folders_.rend(); ++it)
+    if (fs::is_directory(*it, ec) && fs::is_empty(*it, ec)) fs::remove(*it, ec);
+}
+
+void OutputSet::create_folder(const fs::path& dir) {
+  std::vector<fs::path> missing;
+  std::error_code ec;
+  for (fs::path p = dir; !p.empty() && !fs::exists(p, ec); p = p.parent_path()) {
+    missing.push_back(p);
+    if (p == p.parent_path()) break;
+  }
+  fs::create_directories(dir, ec);
+  if (ec) fail_file(dir, "cannot create folder: {}", ec.message());
+  folders_.insert(folders_.end(), missing.rbegin(), missing.rend());  // outermost first, removed last
+}
+
+const fs::path& OutputSet::file(const fs::path& path) {
+  files_.push_back(path);
+  return path;
+}
+
 void write_file_atomic(const fs::path& path, std::string_view bytes) {
   AtomicFile file(path);
   file.stream().write(bytes.data(), static_cast<std::streamsize>(bytes.size()));

@@ -30,6 +30,27 @@ private:
   bool committed_ = false;
 };
 
+// The set of files one command writes, each atomically: unless the command reaches keep(), the destructor
+// removes the files named here and then the folders made here that are left empty, so a command that
+// fails part-way (a full disk, a bad view) leaves no partial set behind for the next run to trip over.
+// Name only files the command may replace: those it checked were not there, or its own.
+class OutputSet {
+public:
+  OutputSet() = default;
+  ~OutputSet();
+  OutputSet(const OutputSet&) = delete;
+  OutputSet& operator=(const OutputSet&) = delete;
+  // Creates `dir` and its missing parents; those made here go again if they are left empty.
+  void create_folder(const std::filesystem::path& dir);
+  // A file about to be written; returns `path`.
+  const std::filesystem::path& file(const std::filesystem::path& path);
+  void keep() { kept_ = true; }
+
+private:
+  std::vector<std::filesystem::path> files_, folders_;
+  bool kept_ = false;
+};
+
 // Writes `bytes` to `path` atomically.
 void write_file_atomic(const std::filesystem::path& path, std::string_view bytes);
 // Calls `write(temporary_path)` to produce the file under a temporary name (same extension, so that

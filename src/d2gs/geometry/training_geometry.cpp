@@ -508,24 +508,29 @@ fs::path training_geometry_dir(const Scene& scene, std::size_t n_views) {
 
 void write_training_geometry(const fs::path& dir, const Scene& scene, const TrainingGeometry& g,
                              const TrainingGeometryOptions& options) {
-  fs::create_directories(dir / "sparse");
-  write_point_cloud_ply(dir / "sparse" / "points3D.ply", g.sparse);
+  // The manifest goes first and comes last, so that files of two geometries are never taken for one; a
+  // write that fails part-way takes back what it wrote, so that a rerun finds the folder as it was.
+  std::error_code ec;
+  fs::remove(dir / "init.json", ec);
+  OutputSet outputs;
+  outputs.create_folder(dir / "sparse");
+  write_point_cloud_ply(outputs.file(dir / "sparse" / "points3D.ply"), g.sparse);
   nlohmann::json depth_files = nlohmann::json::array();
   if (!g.depth.empty()) {
-    fs::create_directories(dir / "dense");
-    fs::create_directories(dir / "depth");
-    write_point_cloud_ply(dir / "dense" / "fused.ply", g.dense);
+    outputs.create_folder(dir / "dense");
+    outputs.create_folder(dir / "depth");
+    write_point_cloud_ply(outputs.file(dir / "dense" / "fused.ply"), g.dense);
     const auto inverse_range = inverse_depth_range(g.depth);
     for (std::size_t i = 0; i < g.views.size(); ++i) {
       const Camera& cam = scene.cameras[static_cast<std::size_t>(g.views[i])];
       const std::string stem = fs::path(cam.image_name).stem().string();
       const DepthMap& d = g.depth[i];
-      write_npy_f32(dir / "depth" / (stem + ".npy"), {static_cast<std::size_t>(d.height), static_cast<std::size_t>(d.width)},
-                    d.depth);
+      write_npy_f32(outputs.file(dir / "depth" / (stem + ".npy")),
+                    {static_cast<std::size_t>(d.height), static_cast<std::size_t>(d.width)}, d.depth);
       Image mask(d.width, d.height, 1);
       for (std::size_t p = 0; p < d.depth.size(); ++p) mask.pixels[p] = d.depth[p] > 0.0f ? 1.0f : 0.0f;
-      write_image(dir / "depth" / (stem + "_valid.png"), mask);
-      write_image(dir / "depth" / (stem + "_depth.png"), depth_preview(d, inverse_range));
+      write_image(outputs.file(dir / "depth" / (stem + "_valid.png")), mask);
+      write_image(outputs.file(dir / "depth" / (stem + "_depth.png")), depth_preview(d, inverse_range));
       depth_files.push_back(stem + ".npy");
     }
   }
@@ -560,6 +565,7 @@ void write_training_geometry(const fs::path& dir, const Scene& scene, const Trai
       {"timings_s", timings},
       {"total_s", g.total_seconds()}};
   write_file_atomic(dir / "init.json", m.dump(2));  // last: a manifest means the files above are complete
+  outputs.keep();
 }
 
 std::optional<CachedTrainingGeometry> find_training_geometry(const fs::path& dir, const Scene& scene,
