@@ -7,6 +7,7 @@
 
 #include "cli/commands.hpp"
 #include "d2gs/core/error.hpp"
+#include "d2gs/core/interrupt.hpp"
 #include "d2gs/core/log.hpp"
 
 int main(int argc, char** argv) {
@@ -61,9 +62,13 @@ int main(int argc, char** argv) {
   }
   d2gs::set_verbosity(quiet ? d2gs::Verbosity::Quiet : verbose ? d2gs::Verbosity::Verbose : d2gs::Verbosity::Normal);
   try {
+    const d2gs::InterruptScope interrupts;  // Ctrl-C stops at the commands' next check, cleaning up
     for (const auto& [sub, run] : runs)
       if (sub->parsed()) return run();
     return 2;
+  } catch (const d2gs::Interrupted& e) {
+    std::fprintf(stderr, "d2gs: %s\n", e.what());
+    return 130;
   } catch (const d2gs::Error& e) {
     std::fprintf(stderr, "d2gs: error: %s\n", e.what());
     return 1;

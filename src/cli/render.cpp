@@ -16,6 +16,7 @@
 #include "cli/device_flag.hpp"
 #include "cli/scene_flags.hpp"
 #include "d2gs/core/atomic_file.hpp"
+#include "d2gs/core/interrupt.hpp"
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/image.hpp"
 #include "d2gs/core/log.hpp"
@@ -111,6 +112,7 @@ int run_render(const RenderCommandOptions& o) {
   spdlog::info("render: {} Gaussians (SH degree {}), {} {} view(s) of {} -> {}", model.size(), model.sh_degree,
                views.size(), o.split, o.scene.source, out_dir.string());
   for (const int v : views) {
+    check_interrupted("while rendering (the views written so far are removed)");
     const Camera& cam = scene.cameras[static_cast<std::size_t>(v)];
     const auto& out = rasterizer->forward(model, nullptr, render::make_render_camera(cam), ro);
     const std::string stem = std::filesystem::path(cam.image_name).stem().string();

@@ -357,6 +357,32 @@ TEST(ExperimentRuns, KilledExperimentResumes) {
   EXPECT_NE(out.find("1 trained"), std::string::npos) << out;
 }
 
+// SIGTERM (or Ctrl-C) to the runner: it starts no further run, asks the running one to stop (it stops at an
+// iteration's end, keeping its checkpoints) and waits for it, then exits 130 saying so; the run is listed
+// as interrupted, to resume.
+TEST(ExperimentRuns, InterruptedExperimentStopsItsRunsAndSaysSo) {
+  const auto dir = test::scratch_dir();
+  const auto config = write_config(dir, {{{"method", "3dgs"}}}, {0, 1}, 100000, 2, true);
+  const fs::path run = dir / "exp/runs/fern/3v/3dgs/seed0";
+  const int pid = test::start_in_background("setsid '" + test::cli_path().string() + "' experiment --config '" +
+                                            config.string() + "' -o '" + (dir / "exp").string() + "' --no-imr >'" +
+                                            (dir / "first.log").string() + "' 2>&1");
+  ASSERT_GT(pid, 0);
+  ASSERT_TRUE(test::wait_until([&] { return fs::exists(run / "chkpnt2.bin"); })) << read_file(dir / "first.log");
+  ::kill(pid, SIGTERM);  // the runner only: it stops its child itself
+  ASSERT_TRUE(test::wait_until([&] { return ::kill(pid, 0) != 0; }, std::chrono::seconds(60)));
+  const std::string log = read_file(dir / "first.log");
+  EXPECT_NE(log.find("interrupted: stopping the 1 running run(s)"), std::string::npos) << log;
+  EXPECT_NE(log.find("d2gs: interrupted by SIGTERM (the unfinished runs resume from their checkpoints"), std::string::npos)
+      << log;
+  EXPECT_EQ(log.find("fern__3v__3dgs__seed1"), std::string::npos) << "a run was started after the signal:\n" << log;
+  const std::string child_log = read_file(dir / "exp/logs/fern__3v__3dgs__seed0.log");
+  EXPECT_NE(child_log.find("d2gs: interrupted by SIGTERM at iteration "), std::string::npos) << child_log;
+  const auto list = test::run_cli("experiment -o '" + (dir / "exp").string() + "' --list");
+  EXPECT_NE(list.output.find("2 runs: 0 finished, 0 running, 1 interrupted, 0 failed, 1 pending"), std::string::npos)
+      << list.output;
+}
+
 TEST(ExperimentRuns, FailingRunIsReportedAndTheOthersFinish) {
   const auto dir = test::scratch_dir();
   const auto config = write_config(

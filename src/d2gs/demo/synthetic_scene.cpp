@@ -16,6 +16,7 @@
 
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
+#include "d2gs/core/interrupt.hpp"
 #include "d2gs/core/npy.hpp"
 #include "d2gs/core/random.hpp"
 #include "d2gs/model/ply.hpp"
@@ -700,6 +701,7 @@ void write_synthetic_scene(const fs::path& dir, const SyntheticSceneOptions& opt
 #pragma omp parallel for schedule(dynamic, 1)
   for (int k = 0; k < n; ++k) {
     try {
+      check_interrupted("while writing the demo scene");  // caught below as any error of view k
       bool skip = false;
 #pragma omp critical(d2gs_synthetic_error)
       skip = static_cast<bool>(error);

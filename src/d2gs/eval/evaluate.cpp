@@ -7,6 +7,7 @@
 #include <nlohmann/json.hpp>
 
 #include "d2gs/core/image.hpp"
+#include "d2gs/core/interrupt.hpp"
 #include "d2gs/eval/image_metrics.hpp"
 #include "d2gs/render/device_choice.hpp"
 #include "d2gs/render/rasterizer.hpp"
@@ -28,6 +29,7 @@ EvalSummary evaluate_views(const Gaussians& model, const Scene& scene, const std
   ro.background = scene.background;
   ro.sh_degree = options.sh_degree;
   for (int v : views) {
+    check_interrupted("while scoring the test views");
     const Camera& cam = scene.cameras.at(static_cast<std::size_t>(v));
     const Image gt = load_image(scene, v);
     const auto& out = rasterizer->forward(model, nullptr, render::make_render_camera(cam), ro);

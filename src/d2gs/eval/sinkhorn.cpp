@@ -13,6 +13,7 @@
 #include <type_traits>
 
 #include "d2gs/core/error.hpp"
+#include "d2gs/core/interrupt.hpp"
 #include "d2gs/core/vector_clones.hpp"
 
 namespace d2gs {
@@ -966,6 +967,7 @@ SinkhornResult sinkhorn_kernel(std::span<const double> a, std::span<const double
       for (const double d : dphi) change = std::max(change, d);
       for (const double d : dpsi) change = std::max(change, d);
       if (!std::isfinite(change)) fail("sinkhorn: the potentials diverged (non-finite values) at iteration {}", result.iterations);
+      check_interrupted("during the transport solve");
       result.last_change = change;
       if (options.on_iteration) options.on_iteration(result.iterations, change, tolerance);
       bool done = false;
@@ -1137,6 +1139,7 @@ SinkhornResult sinkhorn(std::span<const double> a, std::span<const double> b, co
       for (const double d : dphi) change = std::max(change, d);
       for (const double d : dpsi) change = std::max(change, d);
       if (!std::isfinite(change)) fail("sinkhorn: the potentials diverged (non-finite values) at iteration {}", result.iterations);
+      check_interrupted("during the transport solve");
       result.last_change = change;
       if (options.on_iteration) options.on_iteration(result.iterations, change, tolerance);
       if (stage_reached(options, last_stage, change, tolerance, b, psi, psi_next)) {

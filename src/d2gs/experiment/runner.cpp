@@ -18,6 +18,7 @@
 
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
+#include "d2gs/core/interrupt.hpp"
 #include "d2gs/core/json_value.hpp"
 #include "d2gs/core/file_lock.hpp"
 #include "d2gs/core/log.hpp"
@@ -206,7 +207,16 @@ std::vector<RunOutcome> run_all(const std::vector<RunSpec>& runs, const fs::path
     }
   };
 
+  // Interrupted: no run is started any more, the running ones are asked to stop (SIGTERM: they stop at their
+  // next iteration, resumable from their checkpoints) and waited for, then the runner stops too.
+  bool stopping = false;
   while (next < todo.size() || !running.empty()) {
+    if (interrupt_signal() != 0 && !stopping) {
+      stopping = true;
+      next = todo.size();
+      for (const auto& [child_pid, child] : running) ::kill(child_pid, SIGTERM);
+      say(fmt::format("interrupted: stopping the {} running run(s)", running.size()));
+    }
     while (static_cast<int>(running.size()) < jobs && next < todo.size()) launch(todo[next++]);
     if (running.empty()) continue;
     int status = 0;
@@ -250,6 +260,7 @@ std::vector<RunOutcome> run_all(const std::vector<RunSpec>& runs, const fs::path
       say(fmt::format("run {} {}: FAILED ({}); log: {}", run.index, run.id(), out.message, log.string()));
     }
   }  // the run's lock is released with `child`
+  if (stopping) check_interrupted("(the unfinished runs resume from their checkpoints when the experiment is run again)");
   return outcomes;
 }
 

@@ -13,6 +13,7 @@
 #endif
 
 #include "d2gs/core/error.hpp"
+#include "d2gs/core/interrupt.hpp"
 #include "d2gs/core/random.hpp"
 
 namespace d2gs {
@@ -1216,9 +1217,11 @@ std::vector<PatchMatchMap> patch_match_stereo(const std::vector<const Camera*>& 
         upsample(views[i], coarse, level_views[i], states[i]);
         solver.initialise_from(static_cast<int>(i), states[i]);
       }
-      for (int it = 0; it < iterations; ++it)
+      for (int it = 0; it < iterations; ++it) {
+        check_interrupted("during the stereo");
         solver.iterate(static_cast<int>(i), states[i], sweep + 2 * it, std::pow(0.5f, static_cast<float>(step + it)),
                        coarsest);
+      }
     }
     sweep += 2 * iterations;
     step += iterations;
@@ -1234,9 +1237,11 @@ std::vector<PatchMatchMap> patch_match_stereo(const std::vector<const Camera*>& 
     solver.set_geometric(maps);
     for (std::size_t i = 0; i < n; ++i) {
       solver.initialise_from(static_cast<int>(i), states[i], /*costs_known=*/true);
-      for (int it = 0; it < o.geometric_iterations; ++it)
+      for (int it = 0; it < o.geometric_iterations; ++it) {
+        check_interrupted("during the stereo");
         solver.iterate(static_cast<int>(i), states[i], sweep + 2 * it, std::pow(0.5f, static_cast<float>(step + it)),
                        false);
+      }
     }
   }
   // Filter against the final maps of the other views.

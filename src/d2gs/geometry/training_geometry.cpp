@@ -9,6 +9,7 @@
 #include <spdlog/spdlog.h>
 
 #include "d2gs/core/atomic_file.hpp"
+#include "d2gs/core/interrupt.hpp"
 #include "d2gs/core/checksum.hpp"
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/npy.hpp"
@@ -30,6 +31,7 @@ class StepTimer {
 public:
   explicit StepTimer(std::vector<StepTiming>& out) : out_(out) {}
   double done(const std::string& step) {
+    check_interrupted("while building the training views' geometry");
     const auto now = Clock::now();
     const double s = std::chrono::duration<double>(now - start_).count();
     out_.push_back({step, s});
@@ -522,6 +524,7 @@ void write_training_geometry(const fs::path& dir, const Scene& scene, const Trai
     write_point_cloud_ply(outputs.file(dir / "dense" / "fused.ply"), g.dense);
     const auto inverse_range = inverse_depth_range(g.depth);
     for (std::size_t i = 0; i < g.views.size(); ++i) {
+      check_interrupted("while writing the training views' geometry");
       const Camera& cam = scene.cameras[static_cast<std::size_t>(g.views[i])];
       const std::string stem = fs::path(cam.image_name).stem().string();
       const DepthMap& d = g.depth[i];

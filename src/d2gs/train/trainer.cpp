@@ -18,6 +18,7 @@
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/file_lock.hpp"
 #include "d2gs/core/finite.hpp"
+#include "d2gs/core/interrupt.hpp"
 #include "d2gs/core/random.hpp"
 #include "d2gs/core/stage_profile.hpp"
 #include "d2gs/eval/ssim.hpp"
@@ -738,6 +739,7 @@ void Trainer::run() {
   const bool stops_early = cfg.stop_at > 0 && cfg.stop_at < cfg.iterations && start < cfg.stop_at;
   const int end = stops_early ? cfg.stop_at : cfg.iterations;
   while (s.iteration < end) {
+    if (interrupt_signal() != 0) check_interrupted(fmt::format("at iteration {} of {}", s.iteration, cfg.iterations).c_str());
     const IterationRecord rec = step();
     const int t = rec.iteration;
     if (checkpoints.count(t) || (stops_early && t == end)) save_checkpoint(s.out() / fmt::format("chkpnt{}.bin", t));
