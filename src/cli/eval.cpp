@@ -11,12 +11,14 @@
 #include "cli/device_flag.hpp"
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
+#include "d2gs/core/file_lock.hpp"
 #include "d2gs/core/json_value.hpp"
 #include "d2gs/eval/evaluate.hpp"
 #include "d2gs/model/ply.hpp"
 #include "d2gs/report/run_report.hpp"
 #include "d2gs/train/config.hpp"
 #include "d2gs/train/outputs.hpp"
+#include "d2gs/train/trainer.hpp"
 
 namespace d2gs::cli {
 namespace fs = std::filesystem;
@@ -175,6 +177,14 @@ Run add_eval_command(CLI::App& app) {
     for (int v : test)
       if (v < 0 || static_cast<std::size_t>(v) >= scene.cameras.size()) fail_file(cfg_path, "test view {} is not in the scene", v);
     check_test_views_are_the_runs(run / "cameras.json", scene, test, scene_dir, image_source->empty());
+    // One process at a time in a run folder: a training still running there (or another eval) would mix its
+    // results.json and test renders with these.
+    const std::optional<FileLock> lock = FileLock::try_acquire(run / kRunFolderLock);
+    if (!lock) {
+      const long pid = lock_file_holder(run / kRunFolderLock);
+      fail_file(run, "a d2gs train or eval{} is working in this folder: evaluate it once that has ended",
+                pid > 0 ? fmt::format(" (process {})", pid) : "");
+    }
     const int it = pick_iteration(run, *iteration);
     const fs::path ply = run / "point_cloud" / fmt::format("iteration_{}", it) / "point_cloud.ply";
     const Gaussians model = read_gaussians_ply(ply);
@@ -187,9 +197,18 @@ Run add_eval_command(CLI::App& app) {
     eo.device = backend;
     log_device_choice(backend);
     const EvalSummary summary = evaluate_views(model, scene, test, eo);
+    // The training time d2gs train recorded stays with the results of the same iteration (the tables of
+    // d2gs experiment show it); results of another iteration have none.
+    std::optional<double> train_seconds;
+    try {
+      const nlohmann::json before = nlohmann::json::parse(read_file(run / "results.json"));
+      if (before.value("iteration", -1) == it && before.contains("train_seconds") && before["train_seconds"].is_number())
+        train_seconds = before["train_seconds"].get<double>();
+    } catch (const std::exception&) {  // none, or not readable: the new results are written without it
+    }
     const nlohmann::json j = write_results_json(run, summary, scene,
                                                 {.method = c.method, .iteration = it, .gaussians = model.size(),
-                                                 .init_is_oracle = oracle, .train_seconds = std::nullopt,
+                                                 .init_is_oracle = oracle, .train_seconds = train_seconds,
                                                  .device = render::to_string(backend.device)});
     if (*json_only) std::printf("%s\n", j.dump(2).c_str());
     else std::printf("%s(%s, iteration %d, %zu Gaussians%s)\nwritten %s\n", format_table(summary).c_str(),

@@ -2,6 +2,8 @@
 // that names the file or option and the problem, and nothing is written.
 #include <gtest/gtest.h>
 
+#include <unistd.h>
+
 #include <cstdint>
 #include <string>
 
@@ -9,6 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include "d2gs/core/atomic_file.hpp"
+#include "d2gs/core/file_lock.hpp"
 #include "d2gs/core/error.hpp"
 #include "d2gs/model/ply.hpp"
 #include "d2gs/scene/scene.hpp"
@@ -186,9 +189,25 @@ TEST(TrainCli, EvalFindsTheSceneFromAnotherWorkingFolder) {
   auto config = nlohmann::json::parse(read_file(run / "config.json"));
   EXPECT_EQ(config["source"], (dir / "work/fern").string());
 
+  const double trained = nlohmann::json::parse(read_file(run / "results.json"))["train_seconds"].get<double>();
   fs::create_directories(dir / "elsewhere");
   fs::current_path(dir / "elsewhere");
   const auto e = test::run_cli(fmt::format("-q eval -m '{}' --json", run.string()));
+  // The results of the same iteration keep the training time train recorded.
+  EXPECT_EQ(nlohmann::json::parse(read_file(run / "results.json"))["train_seconds"].get<double>(), trained);
+  // While a train (or another eval) holds the run folder, eval writes nothing into it.
+  {
+    const std::string results = read_file(run / "results.json");
+    const auto held = FileLock::try_acquire(run / ".d2gs-train.lock");
+    ASSERT_TRUE(held);
+    const auto busy = test::run_cli(fmt::format("-q eval -m '{}'", run.string()));
+    EXPECT_EQ(busy.exit_code, 1) << busy.output;
+    EXPECT_NE(busy.output.find(run.string() + ": a d2gs train or eval (process " + std::to_string(::getpid()) +
+                               ") is working in this folder"),
+              std::string::npos)
+        << busy.output;
+    EXPECT_EQ(read_file(run / "results.json"), results);
+  }
   // A path relative to the run folder (as a hand-written or moved config may hold).
   config["source"] = "../fern";
   write_file_atomic(run / "config.json", config.dump(2));

@@ -31,7 +31,7 @@ struct RunResults {
   int iteration = 0;
   std::size_t gaussians = 0;
   bool init_is_oracle = false;
-  std::optional<double> train_seconds;  // d2gs train's; d2gs eval leaves it out
+  std::optional<double> train_seconds;  // d2gs train's; d2gs eval keeps the recorded one of the same iteration
   std::string device;                   // the backend that rendered the test views ("cpu", "cuda"); empty: not recorded
 };
 // MODEL/results.json: `summary` (evaluate.hpp's to_json), `run`, and the scene's image source and folder

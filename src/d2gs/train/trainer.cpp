@@ -113,7 +113,7 @@ struct Trainer::State {
 namespace {
 
 // The lock file of a model folder: one `d2gs train` at a time, released by the kernel when it ends.
-constexpr const char* kLockFile = ".d2gs-train.lock";
+constexpr const char* kLockFile = kRunFolderLock;
 
 // Whether `file` is the config.json of a d2gs run (an object naming the method, scene and split), not a
 // file of that name some other program left.

@@ -31,6 +31,10 @@ struct IterationRecord {
   double elapsed_s = 0;
 };
 
+// The lock file of a run folder: held by d2gs train for the whole run and by d2gs eval while it scores,
+// so that neither writes results or renders into a folder the other is working in.
+inline constexpr const char* kRunFolderLock = ".d2gs-train.lock";
+
 class Trainer {
 public:
   // Loads the scene (training views only) and builds the initial model, or restores `resume_from`.
