@@ -243,7 +243,9 @@ RunData load_run(const fs::path& dir, const RunLoadOptions& options) {
   if (!renders.empty()) {
     std::vector<fs::path> files;
     for (const auto& e : fs::directory_iterator(renders / "renders"))
-      if (e.is_regular_file() && e.path().extension() == ".png") files.push_back(e.path());
+      if (e.is_regular_file() && e.path().extension() == ".png" &&
+          atomic_temporary_writer(e.path().filename().string()) == 0)  // not a killed writer's temporary
+        files.push_back(e.path());
     std::sort(files.begin(), files.end());
     for (const auto& f : files) {
       TestView v;
