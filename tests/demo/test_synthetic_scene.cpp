@@ -448,6 +448,17 @@ TEST(SyntheticScene, RewritesItsOwnSceneKeepingOtherFiles) {
   EXPECT_EQ(read_file(dir / "train" / "model.ply"), "user output");
   EXPECT_EQ(nlohmann::json::parse(read_file(dir / "scene.json"))["seed"], 99);
   EXPECT_EQ(load_scene(dir).cameras.size(), 3u);
+  // A rewrite that fails part-way (here a folder stands where view 1's depth map goes) leaves no poses: the
+  // folder of old and new views is no scene until a rewrite completes.
+  o.seed = 7;
+  fs::remove(dir / "depth" / "image001.npy");
+  fs::create_directories(dir / "depth" / "image001.npy" / "in the way");
+  EXPECT_THROW(write_synthetic_scene(dir, o), Error);
+  EXPECT_FALSE(fs::exists(dir / "poses_bounds.npy"));
+  EXPECT_THROW(load_scene(dir), Error);
+  fs::remove_all(dir / "depth" / "image001.npy");
+  write_synthetic_scene(dir, o);
+  EXPECT_EQ(load_scene(dir).cameras.size(), 3u);
 }
 
 TEST(SyntheticScene, RejectsBadOptions) {

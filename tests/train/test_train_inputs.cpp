@@ -227,5 +227,39 @@ TEST(TrainCli, EvalFindsTheSceneFromAnotherWorkingFolder) {
   EXPECT_EQ(nlohmann::json::parse(read_file(run / "results.json"))["per_view"].size(), 3u);
 }
 
+// An evaluation that fails part-way (the last test view's image is truncated after its header) leaves the
+// earlier test renders whole, byte for byte, with their results.json: the new images went to a sibling
+// folder that only replaces them once every view is scored, and it is gone.
+TEST(TrainCli, EvalThatFailsPartWayLeavesTheEarlierRendersWhole) {
+  const auto dir = test::scratch_dir();
+  const fs::path scene = dir / "fern";
+  fs::create_directories(scene / "images_8");
+  fs::copy_file(fern() + "/poses_bounds.npy", scene / "poses_bounds.npy");
+  for (const auto& e : fs::directory_iterator(fs::path(fern()) / "images_8"))
+    fs::create_symlink(e.path(), scene / "images_8" / e.path().filename());
+  const fs::path run = dir / "run";
+  const auto t = test::run_cli(fmt::format("-q train -s '{}' -m '{}' -r 8 --n-views 3 --init random --random-points 300 "
+                                           "--iterations 2", scene.string(), run.string()));
+  ASSERT_EQ(t.exit_code, 0) << t.output;
+  const fs::path renders = run / "test/ours_2/renders";
+  // Marked, so that an evaluation writing view 0 again (the same model renders the same bytes) would show.
+  write_file_atomic(renders / "image000.png", "the earlier evaluation's");
+  std::vector<std::string> before;
+  for (const char* name : {"image000.png", "image008.png", "image016.png"}) before.push_back(read_file(renders / name));
+  const std::string results = read_file(run / "results.json");
+  const std::string png = read_file(scene / "images_8/image016.png");
+  fs::remove(scene / "images_8/image016.png");
+  write_file_atomic(scene / "images_8/image016.png", png.substr(0, png.size() / 2));
+  const auto e = test::run_cli(fmt::format("-q eval -m '{}'", run.string()));
+  EXPECT_EQ(e.exit_code, 1) << e.output;
+  EXPECT_NE(e.output.find((scene / "images_8/image016.png").string() + ": corrupt or truncated PNG"), std::string::npos)
+      << e.output;
+  int k = 0;
+  for (const char* name : {"image000.png", "image008.png", "image016.png"})
+    EXPECT_EQ(read_file(renders / name), before[static_cast<std::size_t>(k++)]) << name;
+  EXPECT_EQ(read_file(run / "results.json"), results);
+  EXPECT_FALSE(fs::exists(run / "test/ours_2.partial"));
+}
+
 }  // namespace
 }  // namespace d2gs

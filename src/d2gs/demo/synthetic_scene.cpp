@@ -690,6 +690,10 @@ void write_synthetic_scene(const fs::path& dir, const SyntheticSceneOptions& opt
   nlohmann::json description = scene.describe();
   description["complete"] = false;  // marks the folder as ours while the views are written
   write_file_atomic(dir / "scene.json", description.dump(2) + "\n");
+  // The poses of an earlier scene go before any view is replaced and come back last: a rewrite that fails
+  // or is interrupted part-way leaves a folder that no loader takes for a scene (old and new views mixed).
+  fs::remove(dir / "poses_bounds.npy", ec);
+  fs::remove(dir / "points3D.ply", ec);
 
   const auto& cams = scene.cameras();
   const int n = static_cast<int>(cams.size());

@@ -2,10 +2,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
+#include "d2gs/core/error.hpp"
 #include "d2gs/core/image.hpp"
 #include "d2gs/core/interrupt.hpp"
 #include "d2gs/eval/image_metrics.hpp"
@@ -28,6 +30,25 @@ EvalSummary evaluate_views(const Gaussians& model, const Scene& scene, const std
   render::RenderOptions ro;
   ro.background = scene.background;
   ro.sh_degree = options.sh_degree;
+  // The images go to a sibling folder that replaces render_dir only once every view is scored: a failure or
+  // an interruption part-way leaves the earlier set whole (with the results.json it belongs to), never a
+  // mix of two evaluations. A killed evaluation's folder is cleared first.
+  namespace fs = std::filesystem;
+  struct Stage {
+    fs::path dir;
+    bool armed = false;
+    ~Stage() {
+      std::error_code ec;
+      if (armed) fs::remove_all(dir, ec);
+    }
+  } stage;
+  if (!options.render_dir.empty()) {
+    stage.dir = options.render_dir.has_filename() ? options.render_dir : options.render_dir.parent_path();
+    stage.dir += ".partial";
+    std::error_code ec;
+    fs::remove_all(stage.dir, ec);
+    stage.armed = true;
+  }
   for (int v : views) {
     check_interrupted("while scoring the test views");
     const Camera& cam = scene.cameras.at(static_cast<std::size_t>(v));
@@ -47,9 +68,17 @@ EvalSummary evaluate_views(const Gaussians& model, const Scene& scene, const std
     summary.views.push_back(m);
     if (!options.render_dir.empty()) {
       const std::string stem = std::filesystem::path(cam.image_name).stem().string();
-      write_image(options.render_dir / "renders" / (stem + ".png"), pred);
-      write_image(options.render_dir / "gt" / (stem + ".png"), gt);
+      write_image(stage.dir / "renders" / (stem + ".png"), pred);
+      write_image(stage.dir / "gt" / (stem + ".png"), gt);
     }
+  }
+  if (stage.armed && fs::is_directory(stage.dir)) {
+    std::error_code ec;
+    fs::remove_all(options.render_dir, ec);
+    if (ec) fail_file(options.render_dir, "cannot replace the earlier test renders: {}", ec.message());
+    fs::rename(stage.dir, options.render_dir, ec);
+    if (ec) fail_file(options.render_dir, "cannot move the test renders into place: {}", ec.message());
+    stage.armed = false;
   }
   for (const auto& m : summary.views) {
     summary.psnr += m.psnr;
