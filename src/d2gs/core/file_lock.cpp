@@ -3,6 +3,7 @@
 #include <fcntl.h>
 #include <signal.h>
 #include <sys/file.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -16,13 +17,25 @@ namespace d2gs {
 namespace fs = std::filesystem;
 
 std::optional<FileLock> FileLock::try_acquire(const fs::path& path) {
-  const int fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
-  if (fd < 0) fail_file(path, "cannot open the lock file ({})", std::strerror(errno));
-  if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
-    const int err = errno;
+  // The lock is on the file the path names when it is taken: a holder may remove its lock file while it
+  // holds it (a run that leaves nothing behind), and a process that opened that file just before would
+  // otherwise hold a lock on a file no one else can see. Such a lock is dropped and the path opened again.
+  int fd = -1;
+  for (int attempt = 0;; ++attempt) {
+    fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+    if (fd < 0) fail_file(path, "cannot open the lock file ({})", std::strerror(errno));
+    if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
+      const int err = errno;
+      ::close(fd);
+      if (err == EWOULDBLOCK) return std::nullopt;
+      fail_file(path, "cannot lock ({})", std::strerror(err));
+    }
+    struct stat held {}, named {};
+    if (::fstat(fd, &held) == 0 && ::stat(path.c_str(), &named) == 0 && held.st_dev == named.st_dev &&
+        held.st_ino == named.st_ino)
+      break;
     ::close(fd);
-    if (err == EWOULDBLOCK) return std::nullopt;
-    fail_file(path, "cannot lock ({})", std::strerror(err));
+    if (attempt == 100) fail_file(path, "cannot lock: the lock file keeps being replaced");
   }
   const std::string pid = std::to_string(static_cast<long>(::getpid())) + "\n";
   if (::ftruncate(fd, 0) == 0) {

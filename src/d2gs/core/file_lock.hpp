@@ -18,7 +18,9 @@ public:
   FileLock& operator=(FileLock&& other) noexcept;
   FileLock(const FileLock&) = delete;
   FileLock& operator=(const FileLock&) = delete;
-  ~FileLock();  // releases the lock (the file stays: removing it would race with the next holder)
+  // Releases the lock. A holder may remove the file before it releases it (try_acquire re-opens a path
+  // whose file went while it waited); removing it after the release would race with the next holder.
+  ~FileLock();
 
   const std::filesystem::path& path() const { return path_; }
 

@@ -277,10 +277,9 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
     bool armed = true;
     ~RemoveIfLeftEmpty() {
       if (!armed) return;
-      const fs::path lock = s.folder_lock->path();
-      s.folder_lock.reset();
       std::error_code ignored;
-      if (new_lock) fs::remove(lock, ignored);
+      if (new_lock) fs::remove(s.folder_lock->path(), ignored);  // while held (core/file_lock.hpp)
+      s.folder_lock.reset();
       if (new_folder) fs::remove(s.out(), ignored);  // only when empty
     }
   } remove_if_left_empty{s, new_folder, new_lock};
