@@ -137,6 +137,21 @@ TEST(RunState, FinishedRunTrainedOtherwiseSaysHow) {
   write_file_atomic(f.dir() / "config.json", recorded.dump());
   EXPECT_EQ(describe(inspect_run(f.out, f.run)), "finished: PSNR 23.207, SSIM 0.7624, 1 Gaussians, 0 s");
   EXPECT_NO_THROW(check_finished_runs_match(f.out, {f.run}));
+  // Scores of an earlier iteration (d2gs eval --iteration 7000 replaced the final ones) are no row of it.
+  const std::string results = read_file(f.dir() / "results.json");
+  auto earlier = nlohmann::json::parse(results);
+  earlier["iteration"] = 7000;
+  write_file_atomic(f.dir() / "results.json", earlier.dump());
+  EXPECT_EQ(describe(inspect_run(f.out, f.run)).rfind("finished with another configuration: its results.json scores "
+                                                      "iteration 7000, not the last of its 10000 (d2gs eval --iteration",
+                                                      0),
+            0u)
+      << describe(inspect_run(f.out, f.run));
+  EXPECT_THROW(check_finished_runs_match(f.out, {f.run}), Error);
+  earlier["iteration"] = 10000;
+  write_file_atomic(f.dir() / "results.json", earlier.dump());
+  EXPECT_NO_THROW(check_finished_runs_match(f.out, {f.run}));
+  write_file_atomic(f.dir() / "results.json", results);
   fs::remove(f.dir() / "config.json");  // a finished run that cannot be checked is not taken as matching
   EXPECT_NE(describe(inspect_run(f.out, f.run)).find("its config.json cannot be compared"), std::string::npos);
 }

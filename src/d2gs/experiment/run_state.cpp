@@ -85,6 +85,20 @@ const char* to_string(RunPhase p) {
 }
 
 std::string finished_run_differs(const fs::path& out_dir, const RunSpec& run) {
+  // Scores of another iteration than the run's last (d2gs eval --iteration N wrote them) are not its row.
+  {
+    std::ifstream in(out_dir / run.dir / "results.json");
+    const auto j = nlohmann::json::parse(in, nullptr, false);
+    const int last = run.train_config.is_object() && run.train_config.contains("iterations") &&
+                             run.train_config["iterations"].is_number_integer()
+                         ? run.train_config["iterations"].get<int>()
+                         : 0;
+    if (j.is_object() && j.contains("iteration") && j["iteration"].is_number_integer() && last > 0 &&
+        j["iteration"].get<int>() != last)
+      return fmt::format("its results.json scores iteration {}, not the last of its {} (d2gs eval --iteration wrote "
+                         "it; d2gs eval -m {} scores the final model again)",
+                         j["iteration"].get<int>(), last, (out_dir / run.dir).string());
+  }
   const fs::path recorded_file = out_dir / run.dir / "config.json";
   nlohmann::json was, now;
   try {
