@@ -14,6 +14,7 @@
 #include "cli/scene_flags.hpp"
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
+#include "d2gs/core/file_lock.hpp"
 #include "d2gs/geometry/training_geometry.hpp"
 #include "d2gs/model/ply.hpp"
 #include "d2gs/scene/scene.hpp"
@@ -176,6 +177,11 @@ Run add_init_command(CLI::App& app) {
     const std::filesystem::path dir =
         o->output.empty() ? training_geometry_dir(scene, split.train.size()) : std::filesystem::path(o->output);
     check_output_folder(dir);  // before the work: a path under a file fails now
+    // One init at a time into a folder, for its whole work: the checks below and the writes at the end
+    // would otherwise let two of them mix their files. The folder, when made here, goes again if init fails.
+    OutputSet folder;
+    folder.create_folder(dir);
+    const FolderWriteLock lock(dir, ".d2gs-init.lock", "d2gs init");
     // A geometry already there (an earlier d2gs init; d2gs train reuses SCENE/{N}_views) is not replaced
     // silently, as d2gs train does not replace a run.
     for (const char* file : {"init.json", "sparse/points3D.ply", "dense/fused.ply"}) {
@@ -202,6 +208,7 @@ Run add_init_command(CLI::App& app) {
            "given); nothing written to {}", split.train.size(), o->dense_stride == 0 ? std::string("default") :
            std::to_string(o->dense_stride), dir.string());
     write_training_geometry(dir, scene, geo, g);
+    folder.keep();
     std::string line = fmt::format("init: {} sparse points (mean reprojection error {:.3f} px)", geo.sparse.size(),
                                    geo.mean_reprojection_px());
     if (g.dense) line += fmt::format(", {} dense points", geo.dense.size());

@@ -16,6 +16,7 @@
 #include "cli/device_flag.hpp"
 #include "cli/scene_flags.hpp"
 #include "d2gs/core/atomic_file.hpp"
+#include "d2gs/core/file_lock.hpp"
 #include "d2gs/core/interrupt.hpp"
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/image.hpp"
@@ -103,6 +104,10 @@ int run_render(const RenderCommandOptions& o) {
   check_render_outputs(out_dir, scene, views, o);
   OutputSet outputs;  // a render that fails part-way takes back the views it wrote (none was there before)
   outputs.create_folder(out_dir);
+  // One render at a time into a folder, the files checked again under its lock: two renders at once would
+  // otherwise both find a name free and one replace the other's view.
+  const FolderWriteLock lock(out_dir, ".d2gs-render.lock", "d2gs render");
+  check_render_outputs(out_dir, scene, views, o);
 
   log_device_choice(backend);
   auto rasterizer = render::make_rasterizer(backend);

@@ -1,6 +1,8 @@
 // End to end on fern, 3 views at 504×378: point counts, accuracy against the dataset's all-view SfM
 // cloud (used here only to measure), determinism, the no-test-image rule, the files of `d2gs init`,
 // the published layout reused by d2gs train, and the one-line error when the views do not overlap.
+#include <unistd.h>
+
 #include <gtest/gtest.h>
 
 #include <set>
@@ -9,6 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include "d2gs/core/atomic_file.hpp"
+#include "d2gs/core/file_lock.hpp"
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/npy.hpp"
 #include "d2gs/geometry/depth_preview.hpp"
@@ -233,6 +236,21 @@ TEST(TrainingGeometry, InitCommandWritesTheLayoutAndTheTrainerLoadsItsDepthPrior
   EXPECT_EQ(partial.exit_code, 1) << partial.output;
   EXPECT_NE(partial.output.find(": write failed"), std::string::npos) << partial.output;
   EXPECT_FALSE(fs::exists(dir / "partial")) << partial.output;
+  // While another init works in the folder (its lock held here), a second one is refused before any work.
+  {
+    fs::create_directories(dir / "busy");
+    const auto held = FileLock::try_acquire(dir / "busy/.d2gs-init.lock");
+    ASSERT_TRUE(held);
+    const auto busy = test::run_cli(fmt::format("init -s '{}' --n-views 3 -r 8 -o '{}' --dense-method sgbm",
+                                                fern().string(), (dir / "busy").string()));
+    EXPECT_EQ(busy.exit_code, 1) << busy.output;
+    EXPECT_NE(busy.output.find((dir / "busy").string() + ": another d2gs init (process " + std::to_string(::getpid()) +
+                               ") is writing into this folder"),
+              std::string::npos)
+        << busy.output;
+    EXPECT_EQ(busy.output.find("SIFT"), std::string::npos) << "the work was done first:\n" << busy.output;
+  }
+  EXPECT_FALSE(fs::exists(dir / "init/.d2gs-init.lock"));  // a finished init leaves no lock file
   // The same folder again: refused before any work, the first geometry left as it was.
   const std::string cloud = read_file(dir / "init/dense/fused.ply");
   const auto again = test::run_cli(

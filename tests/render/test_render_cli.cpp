@@ -1,9 +1,12 @@
 // d2gs render on the real fern scene (shared data) with a model made from its SfM points.
+#include <unistd.h>
+
 #include <cmath>
 
 #include <gtest/gtest.h>
 
 #include "d2gs/core/atomic_file.hpp"
+#include "d2gs/core/file_lock.hpp"
 #include "d2gs/core/image.hpp"
 #include "d2gs/core/npy.hpp"
 #include "d2gs/model/ply.hpp"
@@ -60,7 +63,22 @@ TEST(RenderCli, RendersTestViewsWithDepthAndAlpha) {
   EXPECT_NE(partial.output.find((dir / "partial/image000_depth.npy").string() + ": write failed"), std::string::npos)
       << partial.output;
   EXPECT_FALSE(std::filesystem::exists(dir / "partial"));
+  // While another render writes into the folder (its lock held here), a second one writes nothing there.
+  {
+    std::filesystem::create_directories(dir / "partial");
+    const auto held = FileLock::try_acquire(dir / "partial/.d2gs-render.lock");
+    ASSERT_TRUE(held);
+    const auto busy = run_cli(again);
+    EXPECT_EQ(busy.exit_code, 1) << busy.output;
+    EXPECT_NE(busy.output.find((dir / "partial").string() + ": another d2gs render (process " +
+                               std::to_string(::getpid()) + ") is writing into this folder"),
+              std::string::npos)
+        << busy.output;
+    EXPECT_FALSE(std::filesystem::exists(dir / "partial/image000.png"));
+    std::filesystem::remove(dir / "partial/.d2gs-render.lock");
+  }
   EXPECT_EQ(run_cli(again).exit_code, 0);
+  EXPECT_FALSE(std::filesystem::exists(dir / "partial/.d2gs-render.lock"));  // nothing left behind
   const auto bad = run_cli("render --model '" + (dir / "model.ply").string() + "' -s '" + fern.string() +
                            "' -o '" + (dir / "x").string() + "' --split nope");
   EXPECT_NE(bad.exit_code, 0);

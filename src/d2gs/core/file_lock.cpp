@@ -60,6 +60,19 @@ FileLock::~FileLock() {
   if (fd_ >= 0) ::close(fd_);  // closing the last descriptor of the open file releases the flock
 }
 
+FolderWriteLock::FolderWriteLock(const fs::path& dir, const char* name, const char* who)
+    : lock_(FileLock::try_acquire(dir / name)) {
+  if (!lock_) {
+    const long pid = lock_file_holder(dir / name);
+    fail_file(dir, "another {}{} is writing into this folder", who, pid > 0 ? fmt::format(" (process {})", pid) : "");
+  }
+}
+
+FolderWriteLock::~FolderWriteLock() {
+  std::error_code ec;
+  if (lock_) fs::remove(lock_->path(), ec);  // while held: try_acquire re-opens a path whose file went
+}
+
 long lock_file_holder(const fs::path& path) {
   std::ifstream in(path);
   long pid = 0;

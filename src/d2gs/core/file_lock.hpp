@@ -30,6 +30,21 @@ private:
   std::filesystem::path path_;
 };
 
+// One command's claim on the folder it writes a set of files into (d2gs render's views, d2gs init's
+// geometry): the lock on DIR/NAME, taken at construction or a one-line error "DIR: another WHO (process
+// PID) is writing into this folder", and its file removed, while still held, at destruction, so that a
+// finished command leaves nothing behind. Take it before checking which files are already there.
+class FolderWriteLock {
+public:
+  FolderWriteLock(const std::filesystem::path& dir, const char* name, const char* who);
+  ~FolderWriteLock();
+  FolderWriteLock(const FolderWriteLock&) = delete;
+  FolderWriteLock& operator=(const FolderWriteLock&) = delete;
+
+private:
+  std::optional<FileLock> lock_;
+};
+
 // The process id its holder wrote into the lock file at `path`, 0 when there is none.
 long lock_file_holder(const std::filesystem::path& path);
 
