@@ -180,11 +180,9 @@ Run add_eval_command(CLI::App& app) {
     // One process at a time in a run folder: a training still running there (or another eval) would mix its
     // results.json and test renders with these.
     const std::optional<FileLock> lock = FileLock::try_acquire(run / kRunFolderLock);
-    if (!lock) {
-      const long pid = lock_file_holder(run / kRunFolderLock);
+    if (!lock)
       fail_file(run, "a d2gs train or eval{} is working in this folder: evaluate it once that has ended",
-                pid > 0 ? fmt::format(" (process {})", pid) : "");
-    }
+                lock_holder_note(run / kRunFolderLock));
     const int it = pick_iteration(run, *iteration);
     const fs::path ply = run / "point_cloud" / fmt::format("iteration_{}", it) / "point_cloud.ply";
     const Gaussians model = read_gaussians_ply(ply);

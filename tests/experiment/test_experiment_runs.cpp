@@ -329,14 +329,20 @@ TEST(ExperimentRuns, DamagedNewestCheckpointFallsBackToAnOlderOne) {
   EXPECT_EQ(psnr_of(run), psnr);
 }
 
+// `d2gs experiment --config CONFIG -o DIR/exp --no-imr` in the background, in a process group of its own
+// (setsid), its output in DIR/first.log; returns its process id (0 if it did not start).
+int start_experiment_in_its_own_group(const fs::path& config, const fs::path& dir) {
+  return test::start_in_background("setsid '" + test::cli_path().string() + "' experiment --config '" + config.string() +
+                                   "' -o '" + (dir / "exp").string() + "' --no-imr >'" + (dir / "first.log").string() +
+                                   "' 2>&1");
+}
+
 TEST(ExperimentRuns, KilledExperimentResumes) {
   const auto dir = test::scratch_dir();
   const auto config = write_config(dir, {{{"method", "3dgs"}}}, {0}, 12, 2, true);
   const fs::path run = dir / "exp/runs/fern/3v/3dgs/seed0";
-  // Start in its own process group, then kill the whole group once the first checkpoint exists.
-  const int pid = test::start_in_background("setsid '" + test::cli_path().string() + "' experiment --config '" +
-                                            config.string() + "' -o '" + (dir / "exp").string() + "' --no-imr >'" +
-                                            (dir / "first.log").string() + "' 2>&1");
+  // Kill the whole process group once the first checkpoint exists.
+  const int pid = start_experiment_in_its_own_group(config, dir);
   ASSERT_GT(pid, 0);
   ASSERT_TRUE(test::wait_until([&] { return fs::exists(run / "chkpnt2.bin"); })) << read_file(dir / "first.log");
   ::kill(-pid, SIGKILL);
@@ -364,9 +370,7 @@ TEST(ExperimentRuns, InterruptedExperimentStopsItsRunsAndSaysSo) {
   const auto dir = test::scratch_dir();
   const auto config = write_config(dir, {{{"method", "3dgs"}}}, {0, 1}, 100000, 2, true);
   const fs::path run = dir / "exp/runs/fern/3v/3dgs/seed0";
-  const int pid = test::start_in_background("setsid '" + test::cli_path().string() + "' experiment --config '" +
-                                            config.string() + "' -o '" + (dir / "exp").string() + "' --no-imr >'" +
-                                            (dir / "first.log").string() + "' 2>&1");
+  const int pid = start_experiment_in_its_own_group(config, dir);
   ASSERT_GT(pid, 0);
   ASSERT_TRUE(test::wait_until([&] { return fs::exists(run / "chkpnt2.bin"); })) << read_file(dir / "first.log");
   ::kill(pid, SIGTERM);  // the runner only: it stops its child itself

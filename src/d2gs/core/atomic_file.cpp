@@ -39,11 +39,11 @@ void ensure_parent(const fs::path& destination) {
 void sync_file(const fs::path& temporary, const fs::path& destination) {
   const int fd = ::open(temporary.c_str(), O_RDONLY);
   if (fd < 0) return;
-  const int synced = ::fsync(fd), sync_errno = errno;
-  const int closed = ::close(fd), close_errno = errno;
-  const int lost = synced != 0 && (sync_errno == EIO || sync_errno == ENOSPC || sync_errno == EDQUOT) ? sync_errno
-                   : closed != 0 && (close_errno == EIO || close_errno == ENOSPC || close_errno == EDQUOT) ? close_errno
-                                                                                                            : 0;
+  const auto lost_data = [](int result) {  // the errno of a failed call that reports lost data, else 0
+    return result != 0 && (errno == EIO || errno == ENOSPC || errno == EDQUOT) ? errno : 0;
+  };
+  int lost = lost_data(::fsync(fd));
+  if (const int on_close = lost_data(::close(fd)); lost == 0) lost = on_close;
   if (lost != 0) {
     std::error_code ec;
     fs::remove(temporary, ec);

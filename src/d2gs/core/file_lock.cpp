@@ -62,10 +62,7 @@ FileLock::~FileLock() {
 
 FolderWriteLock::FolderWriteLock(const fs::path& dir, const char* name, const char* who)
     : lock_(FileLock::try_acquire(dir / name)) {
-  if (!lock_) {
-    const long pid = lock_file_holder(dir / name);
-    fail_file(dir, "another {}{} is writing into this folder", who, pid > 0 ? fmt::format(" (process {})", pid) : "");
-  }
+  if (!lock_) fail_file(dir, "another {}{} is writing into this folder", who, lock_holder_note(dir / name));
 }
 
 FolderWriteLock::~FolderWriteLock() {
@@ -78,6 +75,11 @@ long lock_file_holder(const fs::path& path) {
   long pid = 0;
   if (!(in >> pid) || pid <= 0) return 0;
   return pid;
+}
+
+std::string lock_holder_note(const fs::path& path) {
+  const long pid = lock_file_holder(path);
+  return pid > 0 ? fmt::format(" (process {})", pid) : std::string();
 }
 
 bool process_alive(long pid) {

@@ -5,6 +5,7 @@
 // whoever finds it taken. Advisory: it keeps out only the programs that take the same lock.
 #include <filesystem>
 #include <optional>
+#include <string>
 
 namespace d2gs {
 
@@ -47,6 +48,8 @@ private:
 
 // The process id its holder wrote into the lock file at `path`, 0 when there is none.
 long lock_file_holder(const std::filesystem::path& path);
+// " (process PID)" of that holder for a message, or empty when the file names none.
+std::string lock_holder_note(const std::filesystem::path& path);
 
 // True when a process with this id runs on this machine (an ended process its parent has not reaped yet,
 // a zombie, does not).

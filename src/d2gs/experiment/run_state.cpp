@@ -52,6 +52,13 @@ void read_train_log(const fs::path& path, RunState& s) {
   }
 }
 
+// The run's --iterations as its training configuration gives them, 0 when it does not.
+int run_iterations(const RunSpec& run) {
+  const nlohmann::json& c = run.train_config;
+  return c.is_object() && c.contains("iterations") && c["iterations"].is_number_integer() ? c["iterations"].get<int>()
+                                                                                          : 0;
+}
+
 void read_results(const fs::path& path, RunState& s) {
   std::error_code ec;
   if (!fs::is_regular_file(path, ec)) {
@@ -89,10 +96,7 @@ std::string finished_run_differs(const fs::path& out_dir, const RunSpec& run) {
   {
     std::ifstream in(out_dir / run.dir / "results.json");
     const auto j = nlohmann::json::parse(in, nullptr, false);
-    const int last = run.train_config.is_object() && run.train_config.contains("iterations") &&
-                             run.train_config["iterations"].is_number_integer()
-                         ? run.train_config["iterations"].get<int>()
-                         : 0;
+    const int last = run_iterations(run);
     if (j.is_object() && j.contains("iteration") && j["iteration"].is_number_integer() && last > 0 &&
         j["iteration"].get<int>() != last)
       return fmt::format("its results.json scores iteration {}, not the last of its {} (d2gs eval --iteration wrote "
@@ -138,9 +142,7 @@ RunState inspect_run(const fs::path& out_dir, const RunSpec& run, long ended_hol
   RunState s;
   const fs::path dir = out_dir / run.dir;
   const fs::path log = out_dir / "logs" / (run.id() + ".log");
-  if (run.train_config.is_object() && run.train_config.contains("iterations") &&
-      run.train_config["iterations"].is_number_integer())
-    s.iterations = run.train_config["iterations"].get<int>();
+  s.iterations = run_iterations(run);
   std::error_code ec;
   if (fs::is_regular_file(dir / "results.json", ec)) {
     s.phase = RunPhase::Finished;

@@ -192,10 +192,7 @@ FileLock lock_model_dir(const fs::path& dir, bool resuming) {
   fs::create_directories(dir, ec);
   if (ec) fail_file(dir, "cannot create the folder ({})", ec.message());
   std::optional<FileLock> lock = FileLock::try_acquire(dir / kLockFile);
-  if (!lock) {
-    const long pid = lock_file_holder(dir / kLockFile);
-    fail_file(dir, "another d2gs train{} is running in this folder", pid > 0 ? fmt::format(" (process {})", pid) : "");
-  }
+  if (!lock) fail_file(dir, "another d2gs train{} is running in this folder", lock_holder_note(dir / kLockFile));
   const auto removed = remove_stale_temporaries(dir);
   if (!removed.empty()) {
     std::string names;
