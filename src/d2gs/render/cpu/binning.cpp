@@ -112,11 +112,13 @@ void bin_gaussians(const Projected<T>& proj, int width, int height, double alpha
   }
   out.rect_offsets[0] = 0;
   {
-    std::int64_t total = 0;  // each area fits an int (tiles_x·tiles_y), their sum may not
-    for (std::size_t i = 0; i < n; ++i) total += out.rect_offsets[i + 1];
+    std::int64_t total = 0;  // each area fits an int (tiles_x·tiles_y), their sum may not: checked before use
+    for (std::size_t i = 0; i < n; ++i) {
+      total += out.rect_offsets[i + 1];
+      out.rect_offsets[i + 1] = static_cast<int>(total);
+    }
     check_intersection_count(total, width, height);
   }
-  for (std::size_t i = 0; i < n; ++i) out.rect_offsets[i + 1] += out.rect_offsets[i];
   grow(out.rect_tiles, static_cast<std::size_t>(out.rect_offsets[n]));
 
   ps.emplace("render: binning / tiles reached");
