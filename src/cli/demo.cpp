@@ -17,6 +17,7 @@
 #include "cli/commands.hpp"
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
+#include "d2gs/core/file_lock.hpp"
 #include "d2gs/core/image.hpp"
 #include "d2gs/core/npy.hpp"
 #include "d2gs/demo/synthetic_scene.hpp"
@@ -88,17 +89,6 @@ int run_demo(const DemoOptions& opt) {
   validate(scene);
   const std::filesystem::path dir = opt.output;
   check_output_folder(dir);
-  // OUTPUT/run is replaced only when an earlier demo marked it as its own, checked before any work.
-  const std::filesystem::path run_dir = dir / "run";
-  std::error_code ec;
-  bool replace_run = false;
-  if (!opt.scene_only && std::filesystem::exists(run_dir, ec)) {
-    if (!std::filesystem::is_directory(run_dir, ec)) fail_file(run_dir, "exists and is not a folder (the demo trains its run there)");
-    replace_run = std::filesystem::is_regular_file(run_dir / kDemoRunMarker, ec);
-    if (!replace_run && !std::filesystem::is_empty(run_dir, ec))
-      fail_file(run_dir, "holds files the demo did not write (a run of yours, or one of a demo before {} marked its own): "
-                "move it away or choose another -o", kDemoRunMarker);
-  }
   if (!opt.scene_only) {
     // The training split of the scene to be written, checked before any view is rendered.
     Scene planned;
@@ -112,6 +102,23 @@ int run_demo(const DemoOptions& opt) {
     } catch (const Error& e) {
       fail("demo: --views {} with --n-views {}: {}", opt.views, opt.train_views, e.what());
     }
+  }
+  // One demo at a time into a folder, from the checks below to the end of its run: two would otherwise mix
+  // their scene files, and one could remove the run the other trains. The folder, when made here, goes
+  // again if the demo fails before writing into it.
+  OutputSet folder;
+  folder.create_folder(dir);
+  const FolderWriteLock lock(dir, kSyntheticSceneLock, "d2gs demo");
+  // OUTPUT/run is replaced only when an earlier demo marked it as its own, checked before any work.
+  const std::filesystem::path run_dir = dir / "run";
+  std::error_code ec;
+  bool replace_run = false;
+  if (!opt.scene_only && std::filesystem::exists(run_dir, ec)) {
+    if (!std::filesystem::is_directory(run_dir, ec)) fail_file(run_dir, "exists and is not a folder (the demo trains its run there)");
+    replace_run = std::filesystem::is_regular_file(run_dir / kDemoRunMarker, ec);
+    if (!replace_run && !std::filesystem::is_empty(run_dir, ec))
+      fail_file(run_dir, "holds files the demo did not write (a run of yours, or one of a demo before {} marked its own): "
+                "move it away or choose another -o", kDemoRunMarker);
   }
   // Progress on one line when stderr is a terminal and progress lines are wanted.
   const bool show = spdlog::default_logger()->should_log(spdlog::level::info);
@@ -134,6 +141,7 @@ int run_demo(const DemoOptions& opt) {
               dir.string().c_str(), seconds, scene.views, scene.width, scene.height);
   if (opt.scene_only) {
     std::printf("Next: d2gs info -s %s   (cameras and the sparse-view split)\n", d.c_str());
+    folder.keep();
     return 0;
   }
   std::fflush(stdout);
@@ -184,6 +192,7 @@ int run_demo(const DemoOptions& opt) {
               "Report: %s\n",
               c.n_views, scene.views, c.iterations, trainer.model().size(), run_dir.string().c_str(), before.psnr,
               after.psnr, before.ssim, after.ssim, total, d.c_str(), page.string().c_str());
+  folder.keep();
   return 0;
 }
 

@@ -17,6 +17,7 @@
 
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
+#include "d2gs/core/file_lock.hpp"
 #include "d2gs/core/image.hpp"
 #include "d2gs/core/npy.hpp"
 #include "d2gs/model/ply.hpp"
@@ -461,6 +462,29 @@ TEST(SyntheticScene, RewritesItsOwnSceneKeepingOtherFiles) {
   EXPECT_EQ(load_scene(dir).cameras.size(), 3u);
 }
 
+// A progress callback that throws (an interruption, a closed terminal) ends the write with its error, from
+// whichever view's thread called it: no exception may leave the OpenMP section the callback runs in.
+TEST(SyntheticScene, AProgressCallbackThatThrowsEndsTheWriteWithItsError) {
+  const auto dir = scratch_dir() / "scene";
+  auto o = small_options();
+  o.width = o.height = 32;
+  o.views = 6;
+  int calls = 0;
+  try {
+    write_synthetic_scene(dir, o, [&](int done, int) {
+      ++calls;
+      if (done == 2) fail("progress failed at view {}", done);
+    });
+    ADD_FAILURE() << "the callback's error was lost";
+  } catch (const Error& e) {
+    EXPECT_STREQ(e.what(), "progress failed at view 2");
+  }
+  EXPECT_GE(calls, 2);
+  EXPECT_FALSE(fs::exists(dir / "poses_bounds.npy"));  // not a loadable scene
+  write_synthetic_scene(dir, o);
+  EXPECT_EQ(load_scene(dir).cameras.size(), 6u);
+}
+
 TEST(SyntheticScene, RejectsBadOptions) {
   const auto dir = scratch_dir();
   const auto bad = [&](auto edit, const char* needle) {
@@ -582,6 +606,30 @@ TEST(DemoCli, ImpossibleSplitFailsBeforeTheSceneIsWritten) {
   // --scene-only needs no split.
   const auto only = test::run_cli(fmt::format("-q demo -o '{}' --views 3 --scene-only", (dir / "scene").string()));
   EXPECT_EQ(only.exit_code, 0) << only.output;
+}
+
+// While one demo writes into a folder (its lock held here), a second one there writes nothing and says
+// who holds it; a folder holding only the lock file counts as empty for the scene.
+TEST(DemoCli, OneDemoAtATimeIntoAFolder) {
+  const auto dir = test::scratch_dir() / "demo";
+  fs::create_directories(dir);
+  {
+    const auto held = FileLock::try_acquire(dir / kSyntheticSceneLock);
+    ASSERT_TRUE(held);
+    const auto busy = test::run_cli(fmt::format("demo -o '{}' --views 9 -r 8 --iterations 2 --init random", dir.string()));
+    EXPECT_EQ(busy.exit_code, 1) << busy.output;
+    EXPECT_NE(busy.output.find(dir.string() + ": another d2gs demo (process " + std::to_string(::getpid()) +
+                               ") is writing into this folder"),
+              std::string::npos)
+        << busy.output;
+    EXPECT_EQ(files_below(dir), std::vector<fs::path>{kSyntheticSceneLock});  // nothing else was written
+  }
+  // The lock file of a demo killed before it removed it does not make the folder foreign.
+  write_file_atomic(dir / kSyntheticSceneLock, "12345\n");
+  const auto ok = test::run_cli(fmt::format("-q demo -o '{}' --views 9 --scene-only", dir.string()));
+  ASSERT_EQ(ok.exit_code, 0) << ok.output;
+  EXPECT_TRUE(is_synthetic_scene(dir));
+  EXPECT_FALSE(fs::exists(dir / kSyntheticSceneLock));  // removed by the demo that held it
 }
 
 // OUTPUT/run is the demo's to replace only when a demo marked it so: a run of the user's there was deleted.

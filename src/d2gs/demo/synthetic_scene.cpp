@@ -640,6 +640,14 @@ nlohmann::json read_scene_json(const fs::path& dir) {
   }
 }
 
+// True when `dir` holds nothing, or nothing but the lock file of the demo writing into it.
+bool holds_only_the_demo_lock(const fs::path& dir) {
+  std::error_code ec;
+  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec))
+    if (it->path().filename() != kSyntheticSceneLock) return false;
+  return !ec;
+}
+
 // Removes the files of a previous synthetic scene that the new one will not replace: images and depth
 // maps of views >= `views`, and temporaries left by an interrupted run. Nothing else is touched.
 void remove_stale_files(const fs::path& dir, int views) {
@@ -676,7 +684,7 @@ void write_synthetic_scene(const fs::path& dir, const SyntheticSceneOptions& opt
   std::error_code ec;
   if (fs::exists(dir, ec)) {
     if (!fs::is_directory(dir, ec)) fail_file(dir, "exists and is not a folder; refusing to write a scene there");
-    if (!fs::is_empty(dir, ec) && !is_synthetic_scene(dir))
+    if (!holds_only_the_demo_lock(dir) && !is_synthetic_scene(dir))
       fail_file(dir, "folder is not empty and holds no synthetic scene (no scene.json of d2gs); refusing to "
                      "overwrite it: choose another folder");
     remove_stale_files(dir, options.views);
@@ -730,11 +738,19 @@ void write_synthetic_scene(const fs::path& dir, const SyntheticSceneOptions& opt
       const auto [lo, hi] = std::minmax_element(depth.begin(), depth.end());
       row[15] = *lo;
       row[16] = *hi;
+      // No exception may leave an OpenMP critical section: the callback's is taken out of it, then thrown
+      // here as an error of view k.
+      std::exception_ptr failed;
 #pragma omp critical(d2gs_synthetic_progress)
       {
         ++done;
-        if (progress) progress(done, n);
+        if (progress) try {
+            progress(done, n);
+          } catch (...) {
+            failed = std::current_exception();
+          }
       }
+      if (failed) std::rethrow_exception(failed);
     } catch (...) {
 #pragma omp critical(d2gs_synthetic_error)
       if (!error) error = std::current_exception();

@@ -114,6 +114,9 @@ std::vector<Camera> synthetic_scene_cameras(const SyntheticSceneOptions& options
 
 // The generator's mark in scene.json.
 inline constexpr const char* kSyntheticSceneGenerator = "d2gs synthetic scene";
+// The lock file by which `d2gs demo` holds its output folder while it writes the scene and trains in it
+// (core/file_lock.hpp's FolderWriteLock); write_synthetic_scene counts a folder holding only it as empty.
+inline constexpr const char* kSyntheticSceneLock = ".d2gs-demo.lock";
 // True when `dir` holds a scene.json written by write_synthetic_scene.
 bool is_synthetic_scene(const std::filesystem::path& dir);
 
@@ -121,7 +124,8 @@ bool is_synthetic_scene(const std::filesystem::path& dir);
 // non-empty folder without the scene.json of a previous synthetic scene, so that it never overwrites
 // user data; in a previous synthetic scene it replaces its own files (and removes images/depth files of
 // views that no longer exist) and leaves everything else alone. Every file is written atomically.
-// `progress(done, total)` is called after each view (from one thread at a time).
+// `progress(done, total)` is called after each view (from one thread at a time); an exception it throws
+// ends the write as an error of that view would.
 void write_synthetic_scene(const std::filesystem::path& dir, const SyntheticSceneOptions& options,
                            const std::function<void(int, int)>& progress = {});
 
