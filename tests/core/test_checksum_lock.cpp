@@ -51,6 +51,23 @@ TEST(FileLock, OneHolderAtATimeReleasedWhenTheHolderEnds) {
     EXPECT_FALSE(FileLock::try_acquire(path).has_value());
   }
   EXPECT_TRUE(FileLock::try_acquire(path).has_value());
+  EXPECT_EQ(read_file(path), "");  // a released lock names no holder
+  EXPECT_FALSE(lock_holder_running(path));
+
+  // The holder is known by its id and start time: a process that took the id of an ended holder is not it.
+  {
+    const auto held = FileLock::try_acquire(path);
+    ASSERT_TRUE(held.has_value());
+    const unsigned long long start = process_start_time(::getpid());
+    EXPECT_GT(start, 0u);
+    EXPECT_EQ(read_file(path), fmt::format("{} {}\n", ::getpid(), start));
+    EXPECT_TRUE(lock_holder_running(path));
+  }
+  write_file_atomic(path, fmt::format("{} {}\n", ::getpid(), process_start_time(::getpid()) + 1));
+  EXPECT_FALSE(lock_holder_running(path));
+  write_file_atomic(path, fmt::format("{}\n", ::getpid()));  // a file of an older d2gs: the id alone decides
+  EXPECT_TRUE(lock_holder_running(path));
+  EXPECT_EQ(process_start_time(999999999), 0u);
 
   // A holder killed with SIGKILL leaves no stale lock.
   int ready[2];
@@ -69,12 +86,14 @@ TEST(FileLock, OneHolderAtATimeReleasedWhenTheHolderEnds) {
   EXPECT_FALSE(FileLock::try_acquire(path).has_value());
   EXPECT_EQ(lock_file_holder(path), static_cast<long>(child));
   EXPECT_TRUE(process_alive(child));
+  EXPECT_TRUE(lock_holder_running(path));
   ::kill(child, SIGKILL);
   // Ended but not yet reaped (a zombie, which still answers kill(pid, 0)): not alive.
   EXPECT_TRUE(test::wait_until([&] { return !process_alive(child); }, std::chrono::seconds(10)));
   int status = 0;
   ::waitpid(child, &status, 0);
   EXPECT_FALSE(process_alive(child));
+  EXPECT_FALSE(lock_holder_running(path));  // its id stays in the file, but no process holds it
   EXPECT_TRUE(FileLock::try_acquire(path).has_value());
   ::close(ready[0]);
   ::close(ready[1]);

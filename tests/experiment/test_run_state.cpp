@@ -4,6 +4,7 @@
 // interrupted) is in test_experiment_runs.cpp.
 #include <unistd.h>
 
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -66,6 +67,16 @@ TEST(RunState, InterruptedRunNamesItsIterationAndCheckpoint) {
   EXPECT_EQ(describe(s), "interrupted at iteration 2500/10000; resumes from chkpnt2000.bin");
   // A lock file whose holder has ended is not a running run (the lock file stays after its holder).
   write_file_atomic(f.lock(), "999999999\n");
+  EXPECT_EQ(inspect_run(f.out, f.run).phase, RunPhase::Interrupted);
+  // Nor is one whose holder's id now belongs to another process (this one, started at another time).
+  write_file_atomic(f.lock(), fmt::format("{} {}\n", ::getpid(), process_start_time(::getpid()) + 1));
+  EXPECT_EQ(inspect_run(f.out, f.run).phase, RunPhase::Interrupted);
+  // Nor one that a live runner released when the run ended (here: failed) while it went on with others.
+  {
+    const auto held = FileLock::try_acquire(f.lock());
+    ASSERT_TRUE(held.has_value());
+    EXPECT_EQ(inspect_run(f.out, f.run).phase, RunPhase::Running);
+  }
   EXPECT_EQ(inspect_run(f.out, f.run).phase, RunPhase::Interrupted);
 }
 

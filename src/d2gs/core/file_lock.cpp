@@ -9,6 +9,7 @@
 #include <cerrno>
 #include <cstring>
 #include <fstream>
+#include <sstream>
 #include <string>
 
 #include "d2gs/core/error.hpp"
@@ -37,18 +38,27 @@ std::optional<FileLock> FileLock::try_acquire(const fs::path& path) {
     ::close(fd);
     if (attempt == 100) fail_file(path, "cannot lock: the lock file keeps being replaced");
   }
-  const std::string pid = std::to_string(static_cast<long>(::getpid())) + "\n";
+  const long self = static_cast<long>(::getpid());
+  const std::string holder = fmt::format("{} {}\n", self, process_start_time(self));
   if (::ftruncate(fd, 0) == 0) {
-    [[maybe_unused]] const auto written = ::pwrite(fd, pid.data(), pid.size(), 0);
+    [[maybe_unused]] const auto written = ::pwrite(fd, holder.data(), holder.size(), 0);
   }
   return FileLock(fd, path);
 }
+
+namespace {
+// Empties the lock file (it names no holder any more) and closes it, which releases the flock.
+void release(int fd) {
+  [[maybe_unused]] const int cleared = ::ftruncate(fd, 0);
+  ::close(fd);
+}
+}  // namespace
 
 FileLock::FileLock(FileLock&& other) noexcept : fd_(other.fd_), path_(std::move(other.path_)) { other.fd_ = -1; }
 
 FileLock& FileLock::operator=(FileLock&& other) noexcept {
   if (this != &other) {
-    if (fd_ >= 0) ::close(fd_);
+    if (fd_ >= 0) release(fd_);
     fd_ = other.fd_;
     path_ = std::move(other.path_);
     other.fd_ = -1;
@@ -57,7 +67,7 @@ FileLock& FileLock::operator=(FileLock&& other) noexcept {
 }
 
 FileLock::~FileLock() {
-  if (fd_ >= 0) ::close(fd_);  // closing the last descriptor of the open file releases the flock
+  if (fd_ >= 0) release(fd_);  // closing the last descriptor of the open file releases the flock
 }
 
 FolderWriteLock::FolderWriteLock(const fs::path& dir, const char* name, const char* who)
@@ -80,6 +90,31 @@ long lock_file_holder(const fs::path& path) {
 std::string lock_holder_note(const fs::path& path) {
   const long pid = lock_file_holder(path);
   return pid > 0 ? fmt::format(" (process {})", pid) : std::string();
+}
+
+unsigned long long process_start_time(long pid) {
+  if (pid <= 0) return 0;
+  std::ifstream stat("/proc/" + std::to_string(pid) + "/stat");
+  std::string text;
+  if (!std::getline(stat, text)) return 0;
+  const std::size_t close = text.rfind(')');  // the command name may hold spaces and parentheses
+  if (close == std::string::npos) return 0;
+  std::istringstream fields(text.substr(close + 1));
+  std::string field;
+  for (int k = 3; k < 22 && (fields >> field); ++k) {
+  }  // fields 3 (state) to 21
+  unsigned long long start = 0;
+  return (fields >> start) ? start : 0;  // field 22: starttime
+}
+
+bool lock_holder_running(const fs::path& path) {
+  std::ifstream in(path);
+  long pid = 0;
+  if (!(in >> pid) || pid <= 0 || !process_alive(pid)) return false;
+  unsigned long long recorded = 0;
+  if (!(in >> recorded) || recorded == 0) return true;  // no start time recorded: the id alone decides
+  const unsigned long long now = process_start_time(pid);
+  return now == 0 || now == recorded;
 }
 
 bool process_alive(long pid) {

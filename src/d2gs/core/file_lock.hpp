@@ -1,8 +1,9 @@
 #pragma once
 // An exclusive lock on a folder or a job, as a flock(2) on a lock file: held for the lifetime of the
 // FileLock object and released by the kernel when the process ends, however it ends (a crash or
-// SIGKILL leaves no stale lock). The holder writes its process id into the file, for the message of
-// whoever finds it taken. Advisory: it keeps out only the programs that take the same lock.
+// SIGKILL leaves no stale lock). The holder writes its process id and start time into the file, for the
+// message of whoever finds it taken and for lock_holder_running, and empties it when it releases the lock.
+// Advisory: it keeps out only the programs that take the same lock.
 #include <filesystem>
 #include <optional>
 #include <string>
@@ -50,6 +51,14 @@ private:
 long lock_file_holder(const std::filesystem::path& path);
 // " (process PID)" of that holder for a message, or empty when the file names none.
 std::string lock_holder_note(const std::filesystem::path& path);
+
+// True when the process that took the lock on `path` still runs on this machine and has not released it:
+// the file names a live process whose start time is the one recorded (a process that reused the id of an
+// ended holder is not it). A holder on another machine sharing the folder is not seen.
+bool lock_holder_running(const std::filesystem::path& path);
+
+// The start time of process `pid` in clock ticks after boot (/proc/PID/stat), 0 when unknown.
+unsigned long long process_start_time(long pid);
 
 // True when a process with this id runs on this machine (an ended process its parent has not reaped yet,
 // a zombie, does not).

@@ -156,8 +156,9 @@ RunState inspect_run(const fs::path& out_dir, const RunSpec& run, long ended_hol
     const auto checkpoints = checkpoints_in(dir);
     if (!checkpoints.empty()) s.checkpoint = checkpoints.front().first;
   }
-  const long holder = lock_file_holder(out_dir / "logs" / (run.id() + ".lock"));
-  if (holder != ended_holder && process_alive(holder)) {
+  const fs::path lock = out_dir / "logs" / (run.id() + ".lock");
+  const long holder = lock_file_holder(lock);
+  if (holder != ended_holder && lock_holder_running(lock)) {
     s.phase = RunPhase::Running;
     s.pid = holder;
     return s;
