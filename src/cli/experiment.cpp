@@ -83,6 +83,16 @@ int run_experiment_command(const ExperimentOptions& o) {
                     "folder with the whole experiment once (--config without --run-index, or --emit-slurm), then "
                     "its tasks", out.string(), o.run_index);
       }
+    } else if (!o.list && fs::is_directory(out, ec)) {
+      // A folder without the runner's state is another program's, or a training run's: the runner would
+      // write its tables, report.html and logs into it over whatever is there.
+      for (const auto& e : fs::directory_iterator(out, ec)) {
+        const std::string name = e.path().filename().string();
+        if (!(name.starts_with(".d2gs-") && name.ends_with(".lock")))
+          fail_file(out, "is not empty and holds no d2gs experiment (no experiment.json; {} is there): refusing to "
+                         "write into it (choose a new or empty folder)",
+                    name);
+      }
     }
   } else {
     if (!o.data_root.empty()) fail("option --data-root needs --config");

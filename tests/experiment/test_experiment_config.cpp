@@ -266,6 +266,36 @@ TEST(ExperimentCli, AnExperimentFileInsideItsOwnFolderIsNotOverwritten) {
   EXPECT_EQ(read_file(dir / "experiment.json"), text);
 }
 
+// A folder that holds no experiment state but other files (a scene copy, a training run, a user's
+// tables) is not written into: the runner's report.html, tables/ and logs/ would replace files of
+// the same name without a word. An empty folder is fine.
+TEST(ExperimentCli, AFolderOfOtherFilesIsNotWrittenInto) {
+  const auto dir = test::scratch_dir();
+  const auto shipped = test::source_dir() / "configs/experiments/llff_fern_3views.json";
+  const auto command = [&](const fs::path& out) {
+    return test::run_cli("experiment --config '" + shipped.string() + "' --data-root '" +
+                         test::shared_data().string() + "' -o '" + out.string() + "' --emit-slurm");
+  };
+  fs::create_directories(dir / "mine" / "tables");
+  write_file_atomic(dir / "mine" / "report.html", "mine");
+  write_file_atomic(dir / "mine" / "tables" / "results.md", "my table");
+  const auto r = command(dir / "mine");
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find((dir / "mine").string() + ": is not empty and holds no d2gs experiment"), std::string::npos)
+      << r.output;
+  EXPECT_EQ(test::count_occurrences(r.output, "error"), 1u) << r.output;
+  EXPECT_EQ(read_file(dir / "mine" / "report.html"), "mine");
+  EXPECT_EQ(read_file(dir / "mine" / "tables" / "results.md"), "my table");
+  EXPECT_FALSE(fs::exists(dir / "mine" / "experiment.json"));
+  fs::create_directories(dir / "empty");
+  const auto ok = command(dir / "empty");
+  EXPECT_EQ(ok.exit_code, 0) << ok.output;
+  EXPECT_TRUE(fs::exists(dir / "empty" / "experiment.json"));
+  // Once it holds the state, the same command works on it again.
+  const auto again = command(dir / "empty");
+  EXPECT_EQ(again.exit_code, 0) << again.output;
+}
+
 TEST(ExperimentCli, AFoldersStateGivenAsTheExperimentFileSaysWhatItIs) {
   const auto dir = test::scratch_dir();
   const auto shipped = test::source_dir() / "configs/experiments/llff_fern_3views.json";
