@@ -184,6 +184,7 @@ Run add_eval_command(CLI::App& app) {
       fail_file(run, "a d2gs train or eval{} is working in this folder: evaluate it once that has ended",
                 lock_holder_note(run / kRunFolderLock));
     const int it = pick_iteration(run, *iteration);
+    check_replaceable_render_dir(run / "test" / fmt::format("ours_{}", it));  // before the model is read
     const fs::path ply = run / "point_cloud" / fmt::format("iteration_{}", it) / "point_cloud.ply";
     const Gaussians model = read_gaussians_ply(ply);
     if (model.size() == 0) fail_file(ply, "the model has no Gaussians (0 vertices): nothing to evaluate");

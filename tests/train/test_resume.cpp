@@ -7,8 +7,10 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <cstring>
 #include <functional>
 #include <map>
+#include <sstream>
 
 #include <fmt/format.h>
 #include <gtest/gtest.h>
@@ -223,6 +225,68 @@ TEST(Resume, RefusesATrainingImageThatChangedUnderItsName) {
   EXPECT_EQ(message.rfind((dir / "run/chkpnt2.bin").string() + ": cannot resume: training view 10 (image010.png) has "
                           "another image file than it was trained on (CRC-32 ", 0), 0u)
       << message;
+}
+
+// A camera whose pose changed in the scene's files (poses_bounds.npy re-exported with another pose for a
+// training view) is not the camera the checkpoint was trained with, although every image is the same.
+TEST(Resume, RefusesATrainingCameraThatMoved) {
+  const auto dir = test::scratch_dir();
+  const fs::path scene = dir / "fern";
+  fs::create_directories(scene);
+  fs::copy_file(fs::path(fern()) / "poses_bounds.npy", scene / "poses_bounds.npy");
+  for (const char* folder : {"images_4", "images_8"}) {
+    fs::create_directories(scene / folder);
+    for (const auto& e : fs::directory_iterator(fs::path(fern()) / folder))
+      fs::create_symlink(e.path(), scene / folder / e.path().filename());
+  }
+  auto cfg = small_run(dir / "run", 4);
+  cfg.source = scene.string();
+  cfg.checkpoint_iterations = {2};
+  Trainer(cfg).run();
+  // Row 10 of the N×17 array (training view 10 of 1, 10, 19): its x translation (column 3 of [R|t|hwf]) + 0.5.
+  std::string bytes = read_file(scene / "poses_bounds.npy");
+  const std::size_t header = 10 + (static_cast<unsigned char>(bytes[8]) | static_cast<unsigned char>(bytes[9]) << 8);
+  const std::size_t at = header + 8 * (17 * 10 + 3);
+  double x = 0;
+  std::memcpy(&x, bytes.data() + at, 8);
+  x += 0.5;
+  std::memcpy(bytes.data() + at, &x, 8);
+  fs::remove(scene / "poses_bounds.npy");
+  write_file_atomic(scene / "poses_bounds.npy", bytes);
+  const std::string message = error_of([&] { Trainer t(cfg, dir / "run/chkpnt2.bin"); });
+  EXPECT_EQ(message, (dir / "run/chkpnt2.bin").string() + ": cannot resume: training view 10 (image010.png) has another "
+                     "camera pose in the scene's files than it was trained with (centre moved or turned)")
+      << message;
+  // The same file restored: the run resumes.
+  fs::remove(scene / "poses_bounds.npy");
+  fs::copy_file(fs::path(fern()) / "poses_bounds.npy", scene / "poses_bounds.npy");
+  Trainer resumed(cfg, dir / "run/chkpnt2.bin");
+  EXPECT_EQ(resumed.iteration(), 2);
+}
+
+// Resuming at iteration t trains t+1... again: the log keeps its lines up to t, so that no iteration is logged
+// twice (a run interrupted after its last checkpoint, or a finished run resumed from an earlier one).
+TEST(Resume, TheLogIsCutBackToTheCheckpoint) {
+  const auto dir = test::scratch_dir();
+  auto cfg = small_run(dir / "run", 4);
+  cfg.checkpoint_iterations = {2};
+  cfg.log_every = 1;
+  Trainer(cfg).run();
+  const auto iterations = [&] {
+    std::vector<int> its;
+    std::istringstream in(read_file(dir / "run/train_log.jsonl"));
+    for (std::string line; std::getline(in, line);) {
+      const auto j = nlohmann::json::parse(line);
+      if (!j.contains("event")) its.push_back(j["iteration"].get<int>());
+    }
+    return its;
+  };
+  ASSERT_EQ(iterations(), (std::vector<int>{1, 2, 3, 4}));
+  {
+    Trainer t(cfg, dir / "run/chkpnt2.bin");
+    t.run();
+  }
+  EXPECT_EQ(iterations(), (std::vector<int>{1, 2, 3, 4}));
 }
 
 // The usual way to continue a run by hand: its own config.json, where "stereo" is recorded as the folder it

@@ -230,6 +230,60 @@ TEST(TrainCli, EvalFindsTheSceneFromAnotherWorkingFolder) {
 // An evaluation that fails part-way (the last test view's image is truncated after its header) leaves the
 // earlier test renders whole, byte for byte, with their results.json: the new images went to a sibling
 // folder that only replaces them once every view is scored, and it is gone.
+// eval replaces MODEL/test/ours_N whole; a file there that d2gs did not write is not removed with it.
+TEST(TrainCli, EvalKeepsFilesItDidNotWriteInTheRenderFolder) {
+  const auto dir = test::scratch_dir();
+  const fs::path run = dir / "run";
+  const auto t = test::run_cli(fmt::format("-q train -s '{}' -m '{}' -r 8 --n-views 3 --init random --random-points 300 "
+                                           "--iterations 2", fern(), run.string()));
+  ASSERT_EQ(t.exit_code, 0) << t.output;
+  const fs::path ours = run / "test/ours_2";
+  for (const fs::path& notes : {ours / "notes.txt", ours / "renders/notes.txt"}) {
+    write_file_atomic(notes, "mine");
+    const std::string results = read_file(run / "results.json");
+    const auto e = test::run_cli(fmt::format("-q eval -m '{}'", run.string()));
+    EXPECT_EQ(e.exit_code, 1) << e.output;
+    EXPECT_NE(e.output.find("d2gs: error: " + ours.string() + ": holds " +
+                            fs::relative(notes, ours).string() + ", which d2gs did not write there"),
+              std::string::npos)
+        << e.output;
+    EXPECT_EQ(read_file(notes), "mine");
+    EXPECT_EQ(read_file(run / "results.json"), results);
+    fs::remove(notes);
+  }
+  fs::remove_all(ours);
+  write_file_atomic(ours, "a file");
+  const auto file = test::run_cli(fmt::format("-q eval -m '{}'", run.string()));
+  EXPECT_EQ(file.exit_code, 1) << file.output;
+  EXPECT_NE(file.output.find(ours.string() + ": exists and is not a folder of test renders"), std::string::npos)
+      << file.output;
+  EXPECT_EQ(read_file(ours), "a file");
+  fs::remove(ours);
+  const auto ok = test::run_cli(fmt::format("-q eval -m '{}'", run.string()));
+  EXPECT_EQ(ok.exit_code, 0) << ok.output;
+  EXPECT_TRUE(fs::is_regular_file(ours / "renders/image000.png"));
+}
+
+// A test view that cannot be decoded is found before training, not after the model is saved (when the run
+// would fail with a folder that neither resumes nor starts again).
+TEST(TrainCli, ACorruptTestImageFailsBeforeTraining) {
+  const auto dir = test::scratch_dir();
+  const fs::path scene = dir / "fern";
+  fs::create_directories(scene / "images_8");
+  fs::copy_file(fern() + "/poses_bounds.npy", scene / "poses_bounds.npy");
+  for (const auto& e : fs::directory_iterator(fs::path(fern()) / "images_8"))
+    fs::create_symlink(e.path(), scene / "images_8" / e.path().filename());
+  const std::string png = read_file(scene / "images_8/image008.png");  // test view 8 of 0, 8, 16
+  fs::remove(scene / "images_8/image008.png");
+  write_file_atomic(scene / "images_8/image008.png", png.substr(0, png.size() / 2));
+  const auto r = test::run_cli(fmt::format("-q train -s '{}' -m '{}' -r 8 --n-views 3 --init random --random-points 300 "
+                                           "--iterations 2", scene.string(), (dir / "run").string()));
+  EXPECT_EQ(r.exit_code, 1) << r.output;
+  EXPECT_NE(r.output.find((scene / "images_8/image008.png").string() + ": corrupt or truncated PNG"), std::string::npos)
+      << r.output;
+  EXPECT_FALSE(fs::exists(dir / "run"));
+}
+
 TEST(TrainCli, EvalThatFailsPartWayLeavesTheEarlierRendersWhole) {
   const auto dir = test::scratch_dir();
   const fs::path scene = dir / "fern";

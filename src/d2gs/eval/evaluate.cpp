@@ -16,6 +16,25 @@
 
 namespace d2gs {
 
+void check_replaceable_render_dir(const std::filesystem::path& dir) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (!fs::exists(fs::symlink_status(dir, ec))) return;
+  if (!fs::is_directory(fs::symlink_status(dir, ec)))
+    fail_file(dir, "exists and is not a folder of test renders; refusing to replace it (move it away)");
+  // What evaluate_views() writes: renders/ and gt/, each of PNG files. Anything else is someone's.
+  for (const auto& e : fs::directory_iterator(dir, ec)) {
+    const std::string name = e.path().filename().string();
+    if ((name != "renders" && name != "gt") || !e.is_directory(ec) || e.is_symlink(ec))
+      fail_file(dir, "holds {}, which d2gs did not write there; refusing to replace the folder (move it away)", name);
+    for (const auto& f : fs::directory_iterator(e.path(), ec))
+      if (!f.is_regular_file(ec) || f.is_symlink(ec) || f.path().extension() != ".png")
+        fail_file(dir, "holds {}/{}, which d2gs did not write there; refusing to replace the folder (move it away)",
+                  name, f.path().filename().string());
+  }
+  if (ec) fail_file(dir, "cannot read the earlier test renders: {}", ec.message());
+}
+
 EvalSummary evaluate_views(const Gaussians& model, const Scene& scene, const std::vector<int>& views,
                            const EvalOptions& options) {
   EvalSummary summary;
@@ -43,6 +62,7 @@ EvalSummary evaluate_views(const Gaussians& model, const Scene& scene, const std
     }
   } stage;
   if (!options.render_dir.empty()) {
+    check_replaceable_render_dir(options.render_dir);
     stage.dir = options.render_dir.has_filename() ? options.render_dir : options.render_dir.parent_path();
     stage.dir += ".partial";
     std::error_code ec;

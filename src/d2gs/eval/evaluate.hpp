@@ -43,8 +43,13 @@ struct EvalOptions {
   std::string lpips_skipped = "no LPIPS weights given (d2gs eval --lpips-weights FILE)";
 };
 
+// Writes the renders when options.render_dir is set, replacing an earlier set there whole once every view is
+// scored; a render_dir that holds anything else than an earlier set (renders/ and gt/ of PNG files) is refused
+// first (check_replaceable_render_dir), so that no file d2gs did not write is removed.
 EvalSummary evaluate_views(const Gaussians& model, const Scene& scene, const std::vector<int>& views,
                            const EvalOptions& options = {});
+// Throws d2gs::Error naming `dir` when it exists and is not a folder of earlier test renders.
+void check_replaceable_render_dir(const std::filesystem::path& dir);
 // AVGE of one image (method.md §6): the geometric mean of 10^(−PSNR/10), sqrt(1 − SSIM) and LPIPS.
 double avge(double psnr, double ssim, double lpips);
 // "mean" and "per_view" with PSNR, SSIM, LPIPS, AVGE (null when unavailable) and "lpips": how it was

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <bit>
+#include <cmath>
 #include <cstring>
 #include <limits>
 #include <regex>
@@ -68,6 +69,13 @@ json run_to_json(const RunIdentity& r) {
   j["train_images"] = r.train_images;
   j["train_sizes"] = std::move(sizes);
   j["train_image_crcs"] = r.train_image_crcs;
+  json cameras = json::array();
+  for (const auto& camera : r.train_cameras) {
+    json values = json::array();
+    for (const double v : camera) values.push_back(v);
+    cameras.push_back(std::move(values));
+  }
+  j["train_cameras"] = std::move(cameras);
   j["options"] = r.options;
   return j;
 }
@@ -91,6 +99,19 @@ RunIdentity run_from_json(const json& j) {
     r.train_image_crcs = integers<std::uint32_t>(j["train_image_crcs"]);
     if (!r.train_image_crcs.empty() && r.train_image_crcs.size() != r.train_views.size())  // empty: not recorded
       throw std::invalid_argument("the training views and their images' checksums differ in number");
+  }
+  if (j.contains("train_cameras")) {
+    for (const auto& camera : j["train_cameras"]) {
+      if (!camera.is_array() || camera.size() != 16) throw std::invalid_argument("a training camera is not 16 numbers");
+      std::array<double, 16> values{};
+      for (std::size_t k = 0; k < 16; ++k) {
+        if (!camera[k].is_number()) throw std::invalid_argument("a training camera holds a value that is not a number");
+        values[k] = camera[k].get<double>();
+      }
+      r.train_cameras.push_back(values);
+    }
+    if (!r.train_cameras.empty() && r.train_cameras.size() != r.train_views.size())  // empty: not recorded
+      throw std::invalid_argument("the training views and their cameras differ in number");
   }
   r.options = j.at("options");
   if (!r.options.is_object()) throw std::invalid_argument("options is not an object");
@@ -192,6 +213,12 @@ RunIdentity run_identity(const Scene& scene, const Split& split, const TrainConf
     r.train_images.push_back(c.image_name);
     r.train_sizes.push_back({c.width, c.height});
     r.train_image_crcs.push_back(crc32(read_file(c.image_path)));
+    std::array<double, 16> camera{c.fx, c.fy, c.cx, c.cy};
+    for (int row = 0; row < 3; ++row) {
+      for (int col = 0; col < 3; ++col) camera[static_cast<std::size_t>(4 + row * 3 + col)] = c.R_world_to_cam[col][row];
+      camera[static_cast<std::size_t>(13 + row)] = c.t_world_to_cam[row];
+    }
+    r.train_cameras.push_back(camera);
   }
   r.options = identity_options(config);  // the options that change the training, paths made absolute
   return r;
@@ -446,6 +473,21 @@ std::string check_resume(const fs::path& source, const Checkpoint& checkpoint, c
         was.train_image_crcs[k] != run.train_image_crcs[k])
       refuse("training view {} ({}) has another image file than it was trained on (CRC-32 {:08x}, now {:08x})",
              was.train_views[k], run.train_images[k], was.train_image_crcs[k], run.train_image_crcs[k]);
+    if (!was.train_cameras.empty() && k < run.train_cameras.size()) {
+      const auto& a = was.train_cameras[k];
+      const auto& b = run.train_cameras[k];
+      const auto differs = [&](std::size_t from, std::size_t to) {
+        for (std::size_t i = from; i < to; ++i)
+          if (!(std::abs(a[i] - b[i]) <= 1e-9 * std::max({1.0, std::abs(a[i]), std::abs(b[i])}))) return true;
+        return false;
+      };
+      if (differs(0, 4))
+        refuse("training view {} ({}) had the intrinsics fx {} fy {} cx {} cy {}, the scene now gives fx {} fy {} cx {} "
+               "cy {}", was.train_views[k], run.train_images[k], a[0], a[1], a[2], a[3], b[0], b[1], b[2], b[3]);
+      if (differs(4, 16))
+        refuse("training view {} ({}) has another camera pose in the scene's files than it was trained with (centre "
+               "moved or turned)", was.train_views[k], run.train_images[k]);
+    }
   }
   if (was.test_views != run.test_views)
     refuse("its test views were {}, this run's are {}", join(was.test_views), join(run.test_views));

@@ -41,6 +41,10 @@ struct RunIdentity {
   // pixels changed under the same name and size is not the one trained on. Empty in checkpoints written
   // before it was recorded (2026-12-02), which are then not checked for it.
   std::vector<std::uint32_t> train_image_crcs;
+  // Each training view's camera, in split order: fx, fy, cx, cy at -r, then the world-to-camera rotation
+  // (row-major) and translation. A pose or focal length edited in the scene's files is another run. Empty in
+  // checkpoints written before it was recorded (2026-12-03), which are then not checked for it.
+  std::vector<std::array<double, 16>> train_cameras;
   // Every option that changes the training (config.json keys; OptionRole::Training in options.hpp), paths
   // made absolute. Left out: those resolved above (source, resolution, n_views, train_views, test_views),
   // --iterations (checked on its own) and the output-only ones (model_path, save/checkpoint/test

@@ -186,6 +186,27 @@ void check_resumed_run_in_folder(const fs::path& dir, const TrainConfig& cfg, co
 }
 
 // Creates and locks the model folder, removes what killed writers left there, and checks what it holds.
+// The log of a run resumed at iteration `t` (checkpointed at the end of t): the lines up to t, so that the
+// iterations trained again after it are not logged twice (a run interrupted after its last checkpoint, or
+// a finished run resumed from an earlier one). The first line past t, or one cut short, ends what is kept.
+void cut_log_back_to(const fs::path& file, int t) {
+  std::error_code ec;
+  if (!fs::is_regular_file(file, ec)) return;
+  const std::string text = read_file(file);
+  std::size_t keep = 0;
+  while (keep < text.size()) {
+    const std::size_t end = text.find('\n', keep);
+    if (end == std::string::npos) break;
+    const nlohmann::json line = nlohmann::json::parse(text.begin() + static_cast<std::ptrdiff_t>(keep),
+                                                      text.begin() + static_cast<std::ptrdiff_t>(end), nullptr, false);
+    if (line.is_discarded() || !line.is_object() ||
+        (line.contains("iteration") && line["iteration"].is_number() && line["iteration"].get<double>() > t))
+      break;
+    keep = end + 1;
+  }
+  if (keep != text.size()) write_file_atomic(file, text.substr(0, keep));
+}
+
 FileLock lock_model_dir(const fs::path& dir, bool resuming) {
   std::error_code ec;
   const bool started_before = fs::exists(dir / kLockFile, ec);
@@ -285,6 +306,9 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
     s.train_images.push_back(load_image(s.scene, v));
     s.train_cameras.push_back(render::make_render_camera(s.scene.cameras[static_cast<std::size_t>(v)]));
   }
+  // The test views are scored at the test iterations and at the end, after the model is saved: one that
+  // cannot be decoded would fail the run only then, leaving a folder that neither resumes nor restarts.
+  for (int v : s.split.test) (void)load_image(s.scene, v);
   for (const Image& image : s.train_images)
     s.ssim_refs.push_back(s.ssim.reference(image.pixels.data(), image.width, image.height, image.channels));
   s.extent = compute_scene_extent(s.scene, s.split.train);
@@ -356,6 +380,7 @@ Trainer::Trainer(TrainConfig config, const fs::path& resume_from) : s_(std::make
                             : fmt::format("the rasterizer on it, --method {}'s hooks on the CPU", s.cfg.method));
   write_run_config(s.out(), s.cfg, s.scene, s.split, s.extent, s.oracle_init, s.device.device);
   write_cameras_json(s.out(), s.scene, s.split);
+  if (s.iteration > 0) cut_log_back_to(s.out() / "train_log.jsonl", s.iteration);
   s.log.open(s.out() / "train_log.jsonl", s.iteration > 0 ? std::ios::app : std::ios::trunc);
   if (!s.log) fail_file(s.out() / "train_log.jsonl", "cannot open for writing");
   s.started = Clock::now();
