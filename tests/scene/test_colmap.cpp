@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <map>
 
 #include "d2gs/core/atomic_file.hpp"
@@ -397,6 +398,43 @@ TEST(ColmapBadInput, MissingImageNamedAtLoad) {
   model.images[3].name = "img_missing.JPG";
   write_colmap_binary(model, root / "sparse" / "0");
   expect_error([&] { load_scene(root); }, {"img_missing.JPG", "not found", "images.bin"});
+}
+
+// Binary bytes in a text model: the message quotes them escaped (a NUL used to end it, raw bytes reached the
+// terminal) and still says what is wrong.
+TEST(ColmapBadInput, BinaryBytesInTextFilesAreQuotedEscaped) {
+  using namespace std::string_literals;
+  const auto dir = test::scratch_dir();
+  const auto root = dir / "room_text";
+  const auto sparse = root / "sparse" / "0";
+  write_colmap_text(read_colmap_model(room_sparse()), sparse);
+  fs::create_directory_symlink(test::room_dir() / "images", root / "images");
+  const std::string cameras = read_file(sparse / "cameras.txt");
+  test::write_bytes(sparse / "cameras.txt", "\0\0\0\xff\xfe"s);
+  try {
+    load_scene(root);
+    ADD_FAILURE() << "binary cameras.txt accepted";
+  } catch (const Error& e) {
+    const std::string msg = e.what();
+    EXPECT_EQ(std::strlen(e.what()), msg.size()) << "the message holds a NUL";
+    EXPECT_NE(msg.find((sparse / "cameras.txt").string() + ": line 1: camera id '\\x00\\x00\\x00\\xff\\xfe' is not a valid number"),
+              std::string::npos) << msg;
+  }
+  test::write_bytes(sparse / "cameras.txt", cameras);
+  std::string images = read_file(sparse / "images.txt");
+  std::size_t line2 = images.find('\n') + 1;
+  images.insert(line2, "\xff\xfe");
+  test::write_bytes(sparse / "images.txt", images);
+  expect_error([&] { load_scene(root); }, {(sparse / "images.txt").string(), "line 2", "'\\xff\\xfe"});
+  // Each quoting site: a number, the rest of a line, a camera model name.
+  expect_error([] { parse_colmap_images_txt("1 1 0 0 0 0 0 0 1 a.png\n\xff\xfe 1 2\n", "images.txt"); },
+               {"images.txt", "line 2: point2D x '\\xff\\xfe' is not a valid number"});
+  expect_error([] { parse_colmap_cameras_txt("1 PINHOLE 10 10 1 2 3 4 \x01\x02\n", "cameras.txt"); },
+               {"line 1: unexpected text '\\x01\\x02'"});
+  expect_error([] { parse_colmap_cameras_txt("1 PIN\x1b[2JHOLE 10 10 1 2 3 4\n", "cameras.txt"); },
+               {"unknown camera model PIN\\x1b[2JHOLE"});
+  expect_error([] { parse_colmap_cameras_txt("1 PINHOLE 10 10 1 2 3 " + std::string(500, '7') + "x\n", "cameras.txt"); },
+               {"camera parameter '" + std::string(60, '7') + "...' is not a valid number"});
 }
 
 TEST(ColmapBadInput, NonFiniteValues) {

@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <utility>
 
 #include <fmt/core.h>
@@ -29,5 +30,11 @@ template <typename... Args>
                             Args&&... args) {
   throw Error(path.string() + ": " + fmt::format(format, std::forward<Args>(args)...));
 }
+
+// File content quoted in a message, made printable: bytes outside printable ASCII (and outside valid
+// UTF-8 characters) become \xNN, so a NUL cannot cut the message short nor raw binary reach the
+// terminal; more than `max_bytes` bytes of input are cut, with "..." after them.
+// fail_file(path, "line {}: '{}' is not a number", n, printable(token)).
+std::string printable(std::string_view text, std::size_t max_bytes = 60);
 
 }  // namespace d2gs

@@ -102,14 +102,6 @@ std::vector<std::string_view> split_words(std::string_view line) {
   return words;
 }
 
-// Printable rendering of (possibly binary) header text for error messages.
-std::string printable(std::string_view s) {
-  std::string out;
-  for (char c : s.substr(0, 60)) out += (c >= 32 && c < 127) ? c : '?';
-  if (s.size() > 60) out += "...";
-  return out;
-}
-
 PlyHeader parse_header(std::string_view bytes, const fs::path& src) {
   // Magic: "ply" followed by a line end.
   if (bytes.size() < 4 || bytes.substr(0, 3) != "ply" || (bytes[3] != '\n' && bytes[3] != '\r'))

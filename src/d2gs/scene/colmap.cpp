@@ -32,6 +32,8 @@ constexpr ModelInfo kModels[] = {
     {"RAD_TAN_THIN_PRISM_FISHEYE", 16},
 };
 constexpr int kNumModels = static_cast<int>(sizeof kModels / sizeof kModels[0]);
+// Image names are shown in messages up to this many bytes (printable(): binary names are escaped).
+constexpr std::size_t kNameBytes = 200;
 
 // ---------------------------------------------------------------- binary reading
 
@@ -144,11 +146,11 @@ public:
     if (!w.empty() && w.front() == '+') ++first;
     const auto [ptr, ec] = std::from_chars(first, w.data() + w.size(), v);
     if (ec != std::errc() || ptr != w.data() + w.size())
-      fail_file(source_, "line {}: {} '{}' is not a valid number", line_number_, what, w);
+      fail_file(source_, "line {}: {} '{}' is not a valid number", line_number_, what, printable(w));
     return v;
   }
   void expect_end() {
-    if (!empty()) fail_file(source_, "line {}: unexpected text '{}'", line_number_, line_.substr(pos_));
+    if (!empty()) fail_file(source_, "line {}: unexpected text '{}'", line_number_, printable(line_.substr(pos_)));
   }
   std::string_view rest() {
     skip();
@@ -281,7 +283,7 @@ std::vector<ColmapCamera> parse_colmap_cameras_txt(std::string_view text, const 
     c.id = t.number<std::uint32_t>("camera id");
     const auto model = t.word("camera model");
     c.model_id = colmap_model_id(model);
-    if (c.model_id < 0) fail_file(source, "line {}: unknown camera model {}", lines.number(), model);
+    if (c.model_id < 0) fail_file(source, "line {}: unknown camera model {}", lines.number(), printable(model));
     c.width = t.number<std::uint64_t>("camera width");
     c.height = t.number<std::uint64_t>("camera height");
     c.params.resize(static_cast<std::size_t>(colmap_model_num_params(c.model_id)));
@@ -576,13 +578,15 @@ Scene load_colmap_scene(const fs::path& root, const SceneLoadOptions& options) {
 
   std::sort(images.begin(), images.end(), [](const ColmapImage& a, const ColmapImage& b) { return a.name < b.name; });
   for (std::size_t i = 1; i < images.size(); ++i)
-    if (images[i].name == images[i - 1].name) fail_file(images_path, "image name {} appears twice", images[i].name);
+    if (images[i].name == images[i - 1].name)
+      fail_file(images_path, "image name {} appears twice", printable(images[i].name, kNameBytes));
   // points3D's tracks name images by id: two images of one id would make every track through it ambiguous.
   {
     std::unordered_map<std::uint32_t, const std::string*> names_by_id;
     for (const auto& im : images)
       if (const auto [it, fresh] = names_by_id.emplace(im.id, &im.name); !fresh)
-        fail_file(images_path, "image id {} appears twice ({} and {})", im.id, *it->second, im.name);
+        fail_file(images_path, "image id {} appears twice ({} and {})", im.id, printable(*it->second, kNameBytes),
+                  printable(im.name, kNameBytes));
   }
 
   const auto folder = choose_image_folder(root, options.resolution, options.image_source);
@@ -591,8 +595,8 @@ Scene load_colmap_scene(const fs::path& root, const SceneLoadOptions& options) {
   for (const auto& im : images) {
     const auto it = by_id.find(im.camera_id);
     if (it == by_id.end())
-      fail_file(images_path, "image {} refers to camera {}, which {} does not define", im.name, im.camera_id,
-                cameras_path.filename().string());
+      fail_file(images_path, "image {} refers to camera {}, which {} does not define", printable(im.name, kNameBytes),
+                im.camera_id, cameras_path.filename().string());
     const ColmapCamera& c = *it->second;
     Camera cam;
     cam.image_name = im.name;
@@ -601,7 +605,7 @@ Scene load_colmap_scene(const fs::path& root, const SceneLoadOptions& options) {
       std::error_code ec;
       if (fs::exists(cam.image_path, ec)) require_regular_file(cam.image_path);  // a pipe or folder: said so
       if (!fs::is_regular_file(cam.image_path, ec))
-        fail_file(cam.image_path, "image listed in {} not found", images_path.string());
+        fail("{}: image listed in {} not found", printable(cam.image_path.string(), 4096), images_path.string());
     }
     set_camera_image(cam, folder.resample);
     const double sx = static_cast<double>(cam.width) / static_cast<double>(c.width);
@@ -621,16 +625,17 @@ Scene load_colmap_scene(const fs::path& root, const SceneLoadOptions& options) {
     cam.cx = cx * sx;
     cam.cy = cy * sy;
     for (double t : im.tvec)
-      if (!std::isfinite(t)) fail_file(images_path, "image {} has a non-finite translation", im.name);
+      if (!std::isfinite(t)) fail_file(images_path, "image {} has a non-finite translation", printable(im.name, kNameBytes));
     try {
       cam.R_world_to_cam = colmap_quaternion_to_matrix(im.qvec, images_path);
     } catch (const Error&) {  // the same message, with the image named
-      fail_file(images_path, "image {}: invalid rotation quaternion ({}, {}, {}, {})", im.name, im.qvec[0], im.qvec[1],
-                im.qvec[2], im.qvec[3]);
+      fail_file(images_path, "image {}: invalid rotation quaternion ({}, {}, {}, {})", printable(im.name, kNameBytes),
+                im.qvec[0], im.qvec[1], im.qvec[2], im.qvec[3]);
     }
     cam.t_world_to_cam = glm::dvec3(im.tvec[0], im.tvec[1], im.tvec[2]);
     if (const std::string why = implausible_camera(cam); !why.empty())
-      fail_file(images_path, "image {} (camera {} of {}): {}", im.name, c.id, cameras_path.filename().string(), why);
+      fail_file(images_path, "image {} (camera {} of {}): {}", printable(im.name, kNameBytes), c.id,
+                cameras_path.filename().string(), why);
     scene.cameras.push_back(std::move(cam));
   }
 
