@@ -472,6 +472,57 @@ TEST(PlyGaussians, AbsurdVertexCountsRejectedWithoutAllocating) {
   expect_error([&] { parse_gaussians_ply(bytes, "n.ply"); }, {"n.ply", "negative"});
 }
 
+// The data ends where the last declared element's does: bytes after it (trailing bytes, or a vertex
+// count lower than the data) and elements whose data is absent are errors, in every format.
+TEST(PlyGaussians, DataMustEndExactlyWithTheLastElement) {
+  const auto model = random_model(3, 1, 31);
+  const auto dir = scratch_dir();
+  const auto path = dir / "m.ply";
+  write_gaussians_ply(path, model);
+  const std::string good = read_file(path);
+  for (const std::size_t extra : {1, 16, 1000}) {
+    write_file_atomic(path, good + std::string(extra, '\0'));
+    SCOPED_TRACE(extra);
+    expect_error([&] { read_gaussians_ply(path); },
+                 {path.string(), fmt::format("{} unexpected bytes after the last item of element 'vertex'", extra),
+                  "trailing bytes"});
+  }
+  // A header that declares fewer vertices than the data holds: the same case, not a smaller model.
+  std::string fewer = good;
+  fewer.replace(fewer.find("element vertex 3"), 16, "element vertex 2");
+  expect_error([&] { parse_gaussians_ply(fewer, "fewer.ply"); },
+               {"fewer.ply", "unexpected bytes after the last item of element 'vertex'", "fewer items"});
+  std::string none = good;
+  none.replace(none.find("element vertex 3"), 16, "element vertex 0");
+  expect_error([&] { parse_gaussians_ply(none, "none.ply"); }, {"none.ply", "unexpected bytes"});
+
+  const Element absent{"face", {{"vertex_indices", "int", "uchar"}}, {}, "5"};  // declared, no data
+  Element partial{"face", {{"vertex_indices", "int", "uchar"}}, {{{0, 1, 2}}, {{1, 2, 0}}}, "5"};
+  for (const char* format : {"binary_little_endian", "binary_big_endian", "ascii"}) {
+    SCOPED_TRACE(format);
+    const auto vertex = vertex_from_columns(model_columns(model));
+    expect_error([&] { parse_gaussians_ply(make_ply(format, {vertex, absent}), "face.ply"); },
+                 {"face.ply", "truncated", "'face'"});
+    expect_error([&] { parse_gaussians_ply(make_ply(format, {vertex, partial}), "face.ply"); },
+                 {"face.ply", "truncated", "'face'"});
+    Element fewer_vertices = vertex;
+    fewer_vertices.declared_count = "2";
+    expect_error([&] { parse_gaussians_ply(make_ply(format, {fewer_vertices}), "fewer.ply"); },
+                 {"fewer.ply", "after the last item of element 'vertex'"});
+    // The complete file still reads, with the face element after the vertices.
+    partial.declared_count = "";
+    expect_bit_identical(parse_gaussians_ply(make_ply(format, {vertex, partial}), "face.ply"), model);
+    partial.declared_count = "5";
+  }
+  // Ascii: white space after the last item is fine (a final newline, blank lines), another line is not.
+  const std::string ascii = make_ply("ascii", {vertex_from_columns(model_columns(model))});
+  expect_bit_identical(parse_gaussians_ply(ascii + "\n  \r\n\t\n", "a.ply"), model);
+  const auto lines = std::count(ascii.begin(), ascii.end(), '\n');
+  expect_error([&] { parse_gaussians_ply(ascii + "\n1 2 3\n", "a.ply"); },
+               {"a.ply", fmt::format("line {}: unexpected data '1 2 3' after the last item of element 'vertex'", lines + 2)});
+  expect_error([&] { parse_gaussians_ply(ascii + std::string("\xff\0", 2), "a.ply"); }, {"a.ply", "'\\xff\\x00'"});
+}
+
 TEST(PlyGaussians, NanRejectedNamingFilePropertyAndVertex) {
   auto model = random_model(6, 2, 9);
   auto cols = model_columns(model);
@@ -700,6 +751,43 @@ TEST(PlyPointCloud, MissingColoursAreGreyPartialColoursRejected) {
   cols.erase(cols.begin() + 1);
   expect_error([&] { parse_point_cloud_ply(make_ply("binary_little_endian", {vertex_from_columns(cols)}), "p.ply"); },
                {"p.ply", "'y'", "missing"});
+}
+
+TEST(PlyPointCloud, DataMustEndExactlyWithTheLastElement) {
+  const auto dir = scratch_dir();
+  write_point_cloud_ply(dir / "ok.ply", fixture_cloud());
+  const std::string good = read_file(dir / "ok.ply");
+  expect_same_cloud(parse_point_cloud_ply(good, "ok.ply"), fixture_cloud());
+  expect_error([&] { parse_point_cloud_ply(good + std::string(16, 'x'), "t.ply"); },
+               {"t.ply", "16 unexpected bytes after the last item of element 'vertex'"});
+  std::string fewer = good;
+  fewer.replace(fewer.find("vertex 4"), 8, "vertex 3");
+  expect_error([&] { parse_point_cloud_ply(fewer, "fewer.ply"); }, {"fewer.ply", "27 unexpected bytes"});
+  // An element declared after the vertices (fused.ply with faces) whose data is absent.
+  std::string faces = good;
+  faces.insert(faces.find("end_header"), "element face 5\nproperty list uchar int vertex_indices\n");
+  expect_error([&] { parse_point_cloud_ply(faces, "f.ply"); }, {"f.ply", "truncated", "'face'"});
+  const std::string ascii = "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\n"
+                            "end_header\n1 2 3\n4 5 6\n";
+  EXPECT_EQ(parse_point_cloud_ply(ascii, "a.ply").size(), 2u);
+  expect_error([&] { parse_point_cloud_ply(ascii + "7 8 9\n", "a.ply"); }, {"a.ply", "line 10", "'7 8 9'"});
+  expect_error([&] { parse_point_cloud_ply(ascii.substr(0, ascii.size() - 6), "a.ply"); }, {"a.ply", "truncated"});
+}
+
+// What the field writes keeps loading: every .ply of the shared data (COLMAP's fused.ply of the
+// published pipeline: binary, normals, uchar colours), and the writers' own layouts above.
+TEST(PlyPointCloud, SharedDataCloudsLoad) {
+  const auto fused = test::shared_data() / "published_init" / "fern" / "3_views_fused.ply";
+  ASSERT_TRUE(fs::is_regular_file(fused)) << fused;
+  EXPECT_EQ(read_point_cloud_ply(fused).size(), 17903u);
+  int files = 0;
+  for (const auto& entry : fs::recursive_directory_iterator(test::shared_data()))
+    if (entry.is_regular_file() && entry.path().extension() == ".ply") {
+      SCOPED_TRACE(entry.path().string());
+      EXPECT_NO_THROW(read_point_cloud_ply(entry.path()));
+      ++files;
+    }
+  EXPECT_GE(files, 1);
 }
 
 TEST(PlyPointCloud, BadInputsRejected) {

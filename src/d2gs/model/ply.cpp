@@ -257,6 +257,11 @@ class AsciiCursor {
 public:
   explicit AsciiCursor(std::string_view data) : data_(data) {}
   std::size_t remaining() const { return data_.size() - pos_; }
+  // Offset of the next token after white space (the size of the data when none is left).
+  std::size_t next_token() {
+    while (pos_ < data_.size() && is_space(data_[pos_])) ++pos_;
+    return pos_;
+  }
   // Returns false at the end of the data; throws (via `bad`) on a malformed number.
   template <typename Bad>
   bool read(PlyType t, Value& v, Bad&& bad) {
@@ -316,13 +321,16 @@ private:
   std::size_t pos_ = 0;
 };
 
-// Reads the elements of `header` in file order up to and including `target`, skipping the others.
-// For every item of the target and every scalar property p with slot[p] >= 0, calls
-// sink(item_index, slot[p], value). List properties are skipped in every element.
+// Reads every element of `header` in file order, skipping all but `target`. For every item of the
+// target and every scalar property p with slot[p] >= 0, calls sink(item_index, slot[p], value). List
+// properties are skipped in every element. The data must end where the last element's does: a binary
+// file exactly, an ascii file but for white space; anything after it (trailing bytes, or an element
+// count lower than the data) is an error, as is data that ends before every element's is read.
 class ElementReader {
 public:
   ElementReader(std::string_view bytes, const PlyHeader& header, const fs::path& src)
-      : data_(bytes.substr(std::min(header.data_offset, bytes.size()))), header_(header), src_(src) {}
+      : data_(bytes.substr(std::min(header.data_offset, bytes.size()))), header_(header), src_(src),
+        header_lines_(static_cast<std::size_t>(std::count(bytes.begin(), bytes.end() - static_cast<std::ptrdiff_t>(data_.size()), '\n'))) {}
 
   template <typename Sink>
   void read(const PlyElement& target, const std::vector<int>& slot, Sink&& sink) {
@@ -331,15 +339,24 @@ public:
       for (const auto& e : header_.elements) {
         check_count_ascii(e, cur.remaining());
         walk_ascii(cur, e, &e == &target ? &slot : nullptr, sink);
-        if (&e == &target) return;
+      }
+      if (const std::size_t at = cur.next_token(); at < data_.size()) {
+        const auto line = header_lines_ + 1 + static_cast<std::size_t>(std::count(data_.begin(), data_.begin() + static_cast<std::ptrdiff_t>(at), '\n'));
+        const std::size_t eol = data_.find_first_of("\r\n", at);
+        fail_file(src_, "line {}: unexpected data '{}' after the last item of element '{}' (trailing text, or the header "
+                  "declares fewer items than the file holds)", line,
+                  printable(data_.substr(at, eol == std::string_view::npos ? eol : eol - at)), header_.elements.back().name);
       }
     } else {
       BinaryCursor cur(data_, header_.format == PlyFormat::BinaryBigEndian);
       for (const auto& e : header_.elements) {
         check_count_binary(e, cur.remaining());
         walk_binary(cur, e, &e == &target ? &slot : nullptr, sink);
-        if (&e == &target) return;
       }
+      if (cur.remaining() != 0)
+        fail_file(src_, "{} unexpected bytes after the last item of element '{}' (offset {}; trailing bytes, or the "
+                  "header declares fewer items than the file holds)", cur.remaining(), header_.elements.back().name,
+                  header_.data_offset + (data_.size() - cur.remaining()));
     }
   }
 
@@ -444,6 +461,7 @@ private:
   std::string_view data_;
   const PlyHeader& header_;
   const fs::path& src_;
+  std::size_t header_lines_;  // line ends before the data: the data's first line is the next one
 };
 
 const PlyElement& vertex_element(const PlyHeader& header, const fs::path& src) {
