@@ -80,6 +80,9 @@ TEST(Npy, BadInputsNameTheFile) {
   const std::string good = npy_bytes("{'descr': '<f4', 'fortran_order': False, 'shape': (4,), }", std::string(16, '\0'));
   expect_error(good.substr(0, good.size() - 3), "truncated");
   expect_error(good.substr(0, 20), "truncated");
+  expect_error(good + std::string(16, '\0'), "16 unexpected bytes after the .npy data");
+  expect_error(good + "x", "1 unexpected bytes");
+  EXPECT_EQ(parse_npy(good, "good.npy").values.size(), 4u);
   expect_error(npy_bytes("{'descr': '<c16', 'fortran_order': False, 'shape': (1,), }", std::string(16, '\0')),
                "not supported");
   expect_error(npy_bytes("{'fortran_order': False, 'shape': (1,), }", std::string(16, '\0')), "descr");

@@ -222,6 +222,10 @@ TEST(LlffBadInput, NanRowWrongShapeRowCountCorruptMagic) {
   const std::string good = read_file(test::fern_dir() / "poses_bounds.npy");
   test::write_bytes(npy, good.substr(0, good.size() - 9));
   expect_error([&] { load_scene(root, res(8)); }, {npy.string(), "truncated"});
+  // The header's shape says where the data ends: 16 more bytes are a damaged file, not ignored.
+  test::write_bytes(npy, good + std::string(16, '\0'));
+  expect_error([&] { load_scene(root, res(8)); },
+               {npy.string(), "16 unexpected bytes after the .npy data", "340 values of 8 bytes"});
   test::write_bytes(npy, good);
   EXPECT_NO_THROW(load_scene(root, res(8)));
   // Hidden files (an interrupted atomic write, macOS metadata) are not images of the scene.

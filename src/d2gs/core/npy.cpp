@@ -122,6 +122,11 @@ NpyArray parse_npy(std::string_view bytes, const std::filesystem::path& src) {
   if (bytes.size() - data_start < need)
     fail_file(src, "truncated .npy data: {} bytes for {} values of {} bytes", bytes.size() - data_start,
               count, width);
+  // numpy writes nothing after the data: more bytes than the header's shape holds are a damaged file (or a
+  // header whose shape was edited), not something to ignore.
+  if (bytes.size() - data_start > need)
+    fail_file(src, "{} unexpected bytes after the .npy data (the header's shape holds {} values of {} bytes)",
+              bytes.size() - data_start - need, count, width);
 
   NpyArray out;
   out.shape = shape;
