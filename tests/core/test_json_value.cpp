@@ -84,5 +84,26 @@ TEST(JsonValue, ListsNameTheBadElement) {
   EXPECT_NE(error_of([] { json_number_list<int>(json::parse("3"), "views"); }).find("must be a list"), std::string::npos);
 }
 
+// nlohmann keeps the last of two equal keys; parse_json refuses the file, naming the key and where it is.
+TEST(JsonValue, DuplicateKeysAreRefusedWithTheirPath) {
+  const std::string top = error_of([] { parse_json(R"({"camera_angle_x": 0.5, "frames": [], "camera_angle_x": 0.7})", "t.json"); });
+  EXPECT_NE(top.find("t.json: duplicate key 'camera_angle_x'"), std::string::npos) << top;
+  EXPECT_EQ(top.find(" in "), std::string::npos) << top;  // at the top: no path
+  const std::string nested = error_of([] {
+    parse_json(R"({"frames": [{"file_path": "a"}, [1, {"x": 1}], {"file_path": "b", "file_path": "c"}]})", "t.json");
+  });
+  EXPECT_NE(nested.find("t.json: duplicate key 'file_path' in frames[2]"), std::string::npos) << nested;
+  const std::string deep = error_of([] { parse_json(R"({"a": {"b": [0, {"c": 1, "c": 2}]}})", "d.json"); });
+  EXPECT_NE(deep.find("duplicate key 'c' in a.b[1]"), std::string::npos) << deep;
+  // A key with binary bytes is shown escaped.
+  const std::string binary = error_of([] { parse_json("{\"k\\u0000\": 1, \"k\\u0000\": 2}", "b.json"); });
+  EXPECT_NE(binary.find("duplicate key 'k\\x00'"), std::string::npos) << binary;
+  // The same key in different objects, and equal values under different keys, are fine.
+  const json ok = parse_json(R"({"frames": [{"file_path": "a", "m": [[1]]}, {"file_path": "b", "m": [[1]]}], "m": 1})", "ok.json");
+  EXPECT_EQ(ok["frames"][1]["file_path"], "b");
+  EXPECT_EQ(ok["m"], 1);
+  EXPECT_NE(error_of([] { parse_json("{\"a\": 1,", "s.json"); }).find("s.json: invalid JSON"), std::string::npos);
+}
+
 }  // namespace
 }  // namespace d2gs

@@ -160,9 +160,9 @@ TEST(BlenderBadInput, DamagedJson) {
   const auto good = nlohmann::json::parse(read_file(test::lego_dir() / "transforms_train.json"));
 
   test::write_bytes(path, read_file(test::lego_dir() / "transforms_train.json").substr(0, 5000));
-  expect_error([&] { load_scene(root); }, {path.string(), "not valid JSON"});
+  expect_error([&] { load_scene(root); }, {path.string(), "invalid JSON"});
   test::write_bytes(path, "{\"camera_angle_x\": NaN, \"frames\": []}\n\n");
-  expect_error([&] { load_scene(root); }, {path.string(), "not valid JSON"});
+  expect_error([&] { load_scene(root); }, {path.string(), "invalid JSON"});
 
   auto j = good;
   j.erase("camera_angle_x");
@@ -200,6 +200,68 @@ TEST(BlenderBadInput, DamagedJson) {
   expect_error([&] { load_scene(root); }, {path.string(), "frame 6", "beyond 10⁹ units"});
   // The parser directly: a JSON document that is not an object.
   expect_error([] { parse_blender_transforms("[1, 2]", "t.json"); }, {"t.json", "object"});
+}
+
+// A transform_matrix must be a 4x4 rigid transform; a key given twice and an image named by two frames are
+// errors naming the file and the frame (nlohmann keeps the last key; two frames of one image weigh it twice).
+TEST(BlenderBadInput, MatrixRowsDuplicateKeysAndFrames) {
+  const auto dir = test::scratch_dir();
+  const auto root = make_lego_copy(dir);
+  const auto path = root / "transforms_train.json";
+  const auto good = nlohmann::json::parse(read_file(test::lego_dir() / "transforms_train.json"));
+
+  auto j = good;
+  j["frames"][9]["transform_matrix"].erase(3);
+  test::write_bytes(path, j.dump());
+  expect_error([&] { load_scene(root); }, {path.string(), "frame 9", "./train/r_9", "3 rows, expected 4"});
+  j = good;
+  j["frames"][9]["transform_matrix"][3] = nlohmann::json::array({1, 2, 3, 4});
+  test::write_bytes(path, j.dump());
+  expect_error([&] { load_scene(root); },
+               {path.string(), "frame 9", "last row is [1, 2, 3, 4], expected [0, 0, 0, 1]"});
+  j = good;
+  j["frames"][9]["transform_matrix"].push_back(nlohmann::json::array({0, 0, 0, 1}));
+  test::write_bytes(path, j.dump());
+  expect_error([&] { load_scene(root); }, {path.string(), "frame 9", "5 rows"});
+  j = good;
+  j["frames"][9]["transform_matrix"][3] = nlohmann::json::array({0, 0, 1});
+  test::write_bytes(path, j.dump());
+  expect_error([&] { load_scene(root); }, {path.string(), "frame 9", "row 3 does not have 4 entries"});
+
+  // A second camera_angle_x (text edit: the JSON library cannot write one).
+  std::string text = good.dump();
+  text.insert(text.size() - 1, R"(, "camera_angle_x": 0.2)");
+  test::write_bytes(path, text);
+  expect_error([&] { load_scene(root); }, {path.string(), "duplicate key 'camera_angle_x'"});
+  text = good.dump();
+  const auto frame4 = text.find(R"("file_path":"./train/r_4")");
+  ASSERT_NE(frame4, std::string::npos);
+  text.insert(frame4, R"("file_path":"./train/r_1",)");
+  test::write_bytes(path, text);
+  expect_error([&] { load_scene(root); }, {path.string(), "duplicate key 'file_path' in frames[4]"});
+
+  // Two frames naming one image (also when spelt differently), and a test frame naming a train image.
+  j = good;
+  j["frames"][12]["file_path"] = "./train/r_3";
+  test::write_bytes(path, j.dump());
+  expect_error([&] { load_scene(root); },
+               {path.string(), "frame 12 (./train/r_3) names the same image as frame 3 (./train/r_3)"});
+  j["frames"][12]["file_path"] = "train/r_3.png";
+  test::write_bytes(path, j.dump());
+  expect_error([&] { load_scene(root); }, {path.string(), "frame 12 (train/r_3.png) names the same image as frame 3"});
+  test::write_bytes(path, good.dump());
+  auto t = nlohmann::json::parse(read_file(test::lego_dir() / "transforms_test.json"));
+  t["frames"][0]["file_path"] = "./train/r_26";
+  test::write_bytes(root / "transforms_test.json", t.dump());
+  expect_error([&] { load_scene(root); },
+               {"transforms_test.json", "frame 0 (./train/r_26) names the same image as transforms_train.json frame 26"});
+
+  // The files as shipped still load.
+  fs::copy_file(test::lego_dir() / "transforms_test.json", root / "transforms_test.json",
+                fs::copy_options::overwrite_existing);
+  const Scene s = load_scene(root);
+  EXPECT_EQ(s.dataset_train.size(), 100u);
+  EXPECT_EQ(s.dataset_test.size(), 25u);
 }
 
 // A train frame without its image would silently move the split (computed over the train frames): an

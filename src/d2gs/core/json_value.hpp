@@ -22,7 +22,8 @@
 namespace d2gs {
 
 // Parses JSON text; any failure (syntax, a number too large for a double such as 1e400, nesting too
-// deep) throws d2gs::Error "<source>: invalid JSON (...)" on one line.
+// deep) throws d2gs::Error "<source>: invalid JSON (...)" on one line. A key that appears twice in one
+// object (which nlohmann would let the last one win) is the error "<source>: duplicate key 'K' in PATH".
 nlohmann::json parse_json(std::string_view text, const std::filesystem::path& source);
 // read_file + parse_json.
 nlohmann::json read_json_file(const std::filesystem::path& path);

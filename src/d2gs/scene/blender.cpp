@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <map>
 #include <numbers>
 
 #include <fmt/format.h>
@@ -10,18 +11,13 @@
 
 #include "d2gs/core/atomic_file.hpp"
 #include "d2gs/core/error.hpp"
+#include "d2gs/core/json_value.hpp"
 
 namespace d2gs {
 namespace fs = std::filesystem;
 using nlohmann::json;
 
 namespace {
-
-// nlohmann's messages may quote input containing newlines; errors are one line.
-std::string one_line(std::string s) {
-  std::replace_if(s.begin(), s.end(), [](char c) { return c == '\n' || c == '\r'; }, ' ');
-  return s;
-}
 
 double number_at(const json& j, const fs::path& source, const std::string& where) {
   if (!j.is_number()) fail_file(source, "{} is not a number", where);
@@ -40,12 +36,7 @@ fs::path frame_image_path(const fs::path& root, const std::string& file_path) {
 }  // namespace
 
 BlenderTransforms parse_blender_transforms(std::string_view json_text, const fs::path& source) {
-  json doc;
-  try {
-    doc = json::parse(json_text.begin(), json_text.end());
-  } catch (const json::exception& e) {
-    fail_file(source, "not valid JSON ({})", one_line(e.what()));
-  }
+  const json doc = parse_json(json_text, source);  // a duplicate key is an error
   if (!doc.is_object()) fail_file(source, "expected a JSON object");
   BlenderTransforms out;
   if (!doc.contains("camera_angle_x")) fail_file(source, "missing camera_angle_x");
@@ -55,6 +46,7 @@ BlenderTransforms parse_blender_transforms(std::string_view json_text, const fs:
   if (!doc.contains("frames") || !doc["frames"].is_array()) fail_file(source, "missing the frames list");
   const auto& frames = doc["frames"];
   out.frames.reserve(frames.size());
+  std::map<std::string, std::size_t> first_frame;  // image path (normalised) -> first frame that names it
   for (std::size_t k = 0; k < frames.size(); ++k) {
     const auto& f = frames[k];
     const std::string where = fmt::format("frame {}", k);
@@ -63,16 +55,28 @@ BlenderTransforms parse_blender_transforms(std::string_view json_text, const fs:
     BlenderFrame frame;
     frame.file_path = f["file_path"].get<std::string>();
     if (frame.file_path.empty()) fail_file(source, "{} has an empty file_path", where);
-    if (!f.contains("transform_matrix") || !f["transform_matrix"].is_array() || f["transform_matrix"].size() < 3)
-      fail_file(source, "{} ({}) has no 4x4 transform_matrix", where, frame.file_path);
+    const std::string shown = printable(frame.file_path, 200);  // in messages
+    if (const auto [first, fresh] = first_frame.emplace(frame_image_path("", frame.file_path).generic_string(), k);
+        !fresh)
+      fail_file(source, "{} ({}) names the same image as frame {} ({})", where, shown, first->second,
+                printable(out.frames[first->second].file_path, 200));
+    if (!f.contains("transform_matrix") || !f["transform_matrix"].is_array())
+      fail_file(source, "{} ({}) has no 4x4 transform_matrix", where, shown);
     const auto& m = f["transform_matrix"];
-    double a[3][4];
-    for (int r = 0; r < 3; ++r) {
+    if (m.size() != 4)
+      fail_file(source, "{} ({}): transform_matrix has {} rows, expected 4", where, shown, m.size());
+    double a[4][4];
+    for (int r = 0; r < 4; ++r) {
       if (!m[r].is_array() || m[r].size() != 4)
-        fail_file(source, "{} ({}): transform_matrix row {} does not have 4 entries", where, frame.file_path, r);
+        fail_file(source, "{} ({}): transform_matrix row {} does not have 4 entries", where, shown, r);
       for (int c = 0; c < 4; ++c)
-        a[r][c] = number_at(m[r][c], source, fmt::format("{} ({}) transform_matrix[{}][{}]", where, frame.file_path, r, c));
+        a[r][c] = number_at(m[r][c], source, fmt::format("{} ({}) transform_matrix[{}][{}]", where, shown, r, c));
     }
+    // A rigid transform: its last row is [0, 0, 0, 1] (anything else is a projective matrix, or a damaged one).
+    for (int c = 0; c < 4; ++c)
+      if (std::abs(a[3][c] - (c == 3 ? 1.0 : 0.0)) > 1e-6)
+        fail_file(source, "{} ({}): transform_matrix's last row is [{}, {}, {}, {}], expected [0, 0, 0, 1]", where,
+                  shown, a[3][0], a[3][1], a[3][2], a[3][3]);
     // Camera-to-world in OpenGL axes (x right, y up, z back): negate the y and z columns for OpenCV.
     glm::dmat3 c2w;
     for (int r = 0; r < 3; ++r) {
@@ -84,7 +88,7 @@ BlenderTransforms parse_blender_transforms(std::string_view json_text, const fs:
     for (int i = 0; i < 3; ++i)
       for (int j = 0; j < 3; ++j)
         if (std::abs(gram[i][j] - (i == j ? 1.0 : 0.0)) > 1e-3)
-          fail_file(source, "{} ({}): the rotation of transform_matrix is not orthonormal", where, frame.file_path);
+          fail_file(source, "{} ({}): the rotation of transform_matrix is not orthonormal", where, shown);
     frame.R_world_to_cam = glm::transpose(c2w);
     frame.center = glm::dvec3(a[0][3], a[1][3], a[2][3]);
     out.frames.push_back(std::move(frame));
@@ -97,6 +101,7 @@ Scene load_blender_scene(const fs::path& root, const SceneLoadOptions& options) 
   Scene scene = empty_scene(root, SceneFormat::Blender, options);
 
   std::vector<std::string> folders;
+  std::map<fs::path, std::string> first_frame;  // image -> the first frame (file and index) that names it
   for (const char* split : {"train", "test"}) {
     const fs::path json_path = root / fmt::format("transforms_{}.json", split);
     std::error_code ec;
@@ -108,6 +113,14 @@ Scene load_blender_scene(const fs::path& root, const SceneLoadOptions& options) 
       continue;
     }
     const auto transforms = parse_blender_transforms(read_file(json_path), json_path);
+    // A test frame naming a train frame's image would score the model on a view it trained on.
+    for (std::size_t k = 0; k < transforms.frames.size(); ++k) {
+      const auto image = frame_image_path(root, transforms.frames[k].file_path);
+      if (const auto [first, fresh] = first_frame.emplace(image, fmt::format("{} frame {}", json_path.filename().string(), k));
+          !fresh)
+        fail_file(json_path, "frame {} ({}) names the same image as {}", k, printable(transforms.frames[k].file_path, 200),
+                  first->second);
+    }
     std::size_t missing = 0;
     std::string first_missing;
     for (const auto& frame : transforms.frames) {
