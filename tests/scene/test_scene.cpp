@@ -3,6 +3,8 @@
 
 #include <cmath>
 
+#include <sys/stat.h>
+
 #include "d2gs/scene/scene.hpp"
 #include "scene_test_util.hpp"
 
@@ -129,6 +131,30 @@ TEST(Scene, RoomWithImagesNFolderUsesIt) {
   EXPECT_EQ(s8.cameras[0].width, 124);
   EXPECT_EQ(s8.cameras[0].height, 93);
   EXPECT_EQ(load_image(s8, 0).width, 124);
+}
+
+// A layout's marker that is there but no regular file, and a scene path that cannot be resolved: said
+// so, not "unknown scene format" or "not found".
+TEST(SceneBadInput, MarkerThatIsNoFileAndSymlinkLoop) {
+  const auto dir = test::scratch_dir();
+  const auto fifo = dir / "pipe_scene" / "poses_bounds.npy";
+  fs::create_directories(fifo.parent_path());
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  expect_error([&] { load_scene(dir / "pipe_scene"); }, {fifo.string(), "is a named pipe, expected a file"});
+  fs::create_directories(dir / "folder_scene" / "transforms_train.json");
+  expect_error([&] { load_scene(dir / "folder_scene"); },
+               {(dir / "folder_scene" / "transforms_train.json").string(), "is a folder, expected a file"});
+  fs::create_directories(dir / "loop_marker" / "sparse" / "0");
+  fs::create_symlink("images.bin", dir / "loop_marker" / "sparse" / "0" / "images.bin");
+  expect_error([&] { load_scene(dir / "loop_marker"); },
+               {(dir / "loop_marker" / "sparse" / "0" / "images.bin").string(), "cannot be read", "symbolic links"});
+  // The scene folder itself: a loop of two links.
+  fs::create_symlink(dir / "b", dir / "a");
+  fs::create_symlink(dir / "a", dir / "b");
+  expect_error([&] { load_scene(dir / "a"); }, {(dir / "a").string(), "cannot open the scene folder", "symbolic links"});
+  // A dangling link is still "not found".
+  fs::create_symlink(dir / "nowhere", dir / "dangling");
+  expect_error([&] { load_scene(dir / "dangling"); }, {(dir / "dangling").string(), "scene folder not found"});
 }
 
 TEST(SceneBadInput, MissingFolderUnknownFormatBadOptions) {

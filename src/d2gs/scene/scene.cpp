@@ -23,9 +23,13 @@ bool is_dir(const fs::path& p) {
   std::error_code ec;
   return fs::is_directory(p, ec);
 }
-bool is_file(const fs::path& p) {
+// Whether the marker file of a layout is present. A marker that exists but is no regular file (a named
+// pipe, a folder, a loop of symbolic links) is an error saying so, not a reason to try the next layout.
+bool has_marker(const fs::path& p) {
   std::error_code ec;
-  return fs::is_regular_file(p, ec);
+  if (fs::status(p, ec).type() == fs::file_type::not_found) return false;
+  require_regular_file(p);
+  return true;
 }
 
 std::string folder_name(int factor) { return factor == 1 ? std::string("images") : fmt::format("images_{}", factor); }
@@ -116,15 +120,16 @@ Scene load_scene(const fs::path& root, const SceneLoadOptions& options) {
       fail("background colour components must lie in [0, 1]");
   if (!is_dir(root)) {
     std::error_code ec;
-    if (fs::exists(root, ec))
-      fail_file(root, "is a file, not a scene folder (-s takes the folder that holds sparse/0, poses_bounds.npy or "
-                      "transforms_train.json)");
-    fail_file(root, "scene folder not found");
+    const fs::file_status st = fs::status(root, ec);
+    if (st.type() == fs::file_type::not_found) fail_file(root, "scene folder not found");
+    if (ec) fail_file(root, "cannot open the scene folder: {}", ec.message());  // e.g. a loop of symbolic links
+    fail_file(root, "is a file, not a scene folder (-s takes the folder that holds sparse/0, poses_bounds.npy or "
+                    "transforms_train.json)");
   }
   const fs::path sparse = root / "sparse" / "0";
-  if (is_file(sparse / "images.bin") || is_file(sparse / "images.txt")) return load_colmap_scene(root, options);
-  if (is_file(root / "poses_bounds.npy")) return load_llff_scene(root, options);
-  if (is_file(root / "transforms_train.json")) return load_blender_scene(root, options);
+  if (has_marker(sparse / "images.bin") || has_marker(sparse / "images.txt")) return load_colmap_scene(root, options);
+  if (has_marker(root / "poses_bounds.npy")) return load_llff_scene(root, options);
+  if (has_marker(root / "transforms_train.json")) return load_blender_scene(root, options);
   fail_file(root,
             "unknown scene format: looked for sparse/0/images.bin or sparse/0/images.txt (COLMAP), "
             "poses_bounds.npy (LLFF) and transforms_train.json (Blender)");
