@@ -327,10 +327,12 @@ private:
 // file exactly, an ascii file but for white space; anything after it (trailing bytes, or an element
 // count lower than the data) is an error, as is data that ends before every element's is read.
 class ElementReader {
+  static std::size_t line_ends(std::string_view s) { return static_cast<std::size_t>(std::count(s.begin(), s.end(), '\n')); }
+
 public:
   ElementReader(std::string_view bytes, const PlyHeader& header, const fs::path& src)
       : data_(bytes.substr(std::min(header.data_offset, bytes.size()))), header_(header), src_(src),
-        header_lines_(static_cast<std::size_t>(std::count(bytes.begin(), bytes.end() - static_cast<std::ptrdiff_t>(data_.size()), '\n'))) {}
+        header_lines_(line_ends(bytes.substr(0, bytes.size() - data_.size()))) {}
 
   template <typename Sink>
   void read(const PlyElement& target, const std::vector<int>& slot, Sink&& sink) {
@@ -341,11 +343,11 @@ public:
         walk_ascii(cur, e, &e == &target ? &slot : nullptr, sink);
       }
       if (const std::size_t at = cur.next_token(); at < data_.size()) {
-        const auto line = header_lines_ + 1 + static_cast<std::size_t>(std::count(data_.begin(), data_.begin() + static_cast<std::ptrdiff_t>(at), '\n'));
         const std::size_t eol = data_.find_first_of("\r\n", at);
-        fail_file(src_, "line {}: unexpected data '{}' after the last item of element '{}' (trailing text, or the header "
-                  "declares fewer items than the file holds)", line,
-                  printable(data_.substr(at, eol == std::string_view::npos ? eol : eol - at)), header_.elements.back().name);
+        const std::string_view text = data_.substr(at, eol == std::string_view::npos ? eol : eol - at);
+        fail_file(src_, "line {}: unexpected data '{}' after the last item of element '{}' (trailing text, or the "
+                  "header declares fewer items than the file holds)", header_lines_ + 1 + line_ends(data_.substr(0, at)),
+                  printable(text), header_.elements.back().name);
       }
     } else {
       BinaryCursor cur(data_, header_.format == PlyFormat::BinaryBigEndian);
