@@ -6,20 +6,11 @@
 
 #include <CLI/CLI.hpp>
 
+#include "cli/option_checks.hpp"
+
 namespace d2gs::cli {
 
 using Run = std::function<int()>;
-
-// Check for unsigned options (seeds, counts): CLI11 2.1 reads "-1" into an unsigned as 2^64 − 1.
-inline CLI::Validator not_negative() {
-  return CLI::Validator(
-      [](std::string& value) -> std::string {
-        const auto first = value.find_first_not_of(" \t");
-        if (first != std::string::npos && value[first] == '-') return "must not be negative (got " + value + ")";
-        return {};
-      },
-      "≥ 0", "not_negative");
-}
 
 Run add_info_command(CLI::App& app);
 Run add_demo_command(CLI::App& app);

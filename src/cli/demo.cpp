@@ -204,31 +204,29 @@ Run add_demo_command(CLI::App& app) {
       "demo",
       "Generate the built-in synthetic scene (ray-traced, LLFF layout, with true depth), train D²GS on 3 of its "
       "views with the default settings of d2gs train --method d2gs (the release preset), evaluate the held-out views and write the HTML report (RUN = OUTPUT/run)");
-  sub->add_option("-o,--output", opt->output, "Folder to write (created; refused if it holds other data)")
+  add_option(*sub, "-o,--output", opt->output, "Folder to write (created; refused if it holds other data)")
       ->capture_default_str();
-  sub->add_option("--seed", opt->seed, "Seed of the scene (layout jitter, colours, textures)")
-      ->capture_default_str()
-      ->check(not_negative());
-  sub->add_option("--views", opt->views, "Number of cameras")->capture_default_str()->check(CLI::Range(2, 1000));
+  add_option(*sub, "--seed", opt->seed, "Seed of the scene (layout jitter, colours, textures)")->capture_default_str();
+  add_option(*sub, "--views", opt->views, "Number of cameras")->capture_default_str()->check(in_range(2, 1000));
   sub->add_flag("--scene-only", opt->scene_only, "Only generate the scene (no training, no report)");
-  sub->add_option("--iterations", opt->iterations, "Training iterations of the demo run")
+  add_option(*sub, "--iterations", opt->iterations, "Training iterations of the demo run")
       ->capture_default_str()
-      ->check(CLI::Range(1, 100000));
-  sub->add_option("-r,--resolution", opt->resolution, "Train and evaluate at 1/R of the scene's resolution")
+      ->check(in_range(1, 100000));
+  add_option(*sub, "-r,--resolution", opt->resolution, "Train and evaluate at 1/R of the scene's resolution")
       ->capture_default_str()
       ->check(CLI::IsMember({1, 2, 4, 8}));
-  sub->add_option("--n-views", opt->train_views, "Training views of the sparse-view split")
+  add_option(*sub, "--n-views", opt->train_views, "Training views of the sparse-view split")
       ->capture_default_str()
-      ->check(CLI::Range(1, 1000));
-  sub->add_option("--init", opt->init,
-                  "Initial points: 'dense' (stereo + fusion of the training images, as d2gs init and d2gs "
-                  "train do), 'sparse' (SIFT triangulation of the training images), 'training-depth' (the true "
-                  "depth of the training views only, lifted to 3D; written to OUTPUT/init_training_views.ply), "
-                  "'random', or 'points' (the scene's points3D.ply, sampled from every view: an oracle)")
+      ->check(in_range(1, 1000));
+  add_option(*sub, "--init", opt->init,
+             "Initial points: 'dense' (stereo + fusion of the training images, as d2gs init and d2gs "
+             "train do), 'sparse' (SIFT triangulation of the training images), 'training-depth' (the true "
+             "depth of the training views only, lifted to 3D; written to OUTPUT/init_training_views.ply), "
+             "'random', or 'points' (the scene's points3D.ply, sampled from every view: an oracle)")
       ->capture_default_str()
       ->check(CLI::IsMember({"dense", "sparse", "training-depth", "random", "points"}));
-  sub->add_option("--dense-method", opt->dense_method,
-                  "Stereo of --init dense: 'sgbm' or 'patchmatch' (as d2gs train --init-dense-method)")
+  add_option(*sub, "--dense-method", opt->dense_method,
+             "Stereo of --init dense: 'sgbm' or 'patchmatch' (as d2gs train --init-dense-method)")
       ->capture_default_str()
       ->check(CLI::IsMember({"sgbm", "patchmatch"}));
   return [opt]() -> int { return run_demo(*opt); };

@@ -2,15 +2,17 @@
 
 #include <spdlog/spdlog.h>
 
+#include "cli/option_checks.hpp"
+
 namespace d2gs::cli {
 
 void add_device_flag(CLI::App& cmd, std::string& word) {
   word = "auto";
-  cmd.add_option("--device", word,
-                 "Backend: cpu (the reference), cuda (an error where no CUDA device exists or this d2gs was built without "
-                 "CUDA), auto (CUDA where it can, else the CPU, "
-                 "saying why; `d2gs info` shows the choice), emulated (the CUDA kernels run on the CPU by the emulator "
-                 "instead of a GPU: slow, for checking them)")
+  add_option(cmd, "--device", word,
+             "Backend: cpu (the reference), cuda (an error where no CUDA device exists or this d2gs was built without "
+             "CUDA), auto (CUDA where it can, else the CPU, "
+             "saying why; `d2gs info` shows the choice), emulated (the CUDA kernels run on the CPU by the emulator "
+             "instead of a GPU: slow, for checking them)")
       ->capture_default_str()
       ->check(CLI::IsMember({"cpu", "cuda", "auto", "emulated"}));
 }

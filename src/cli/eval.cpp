@@ -121,22 +121,22 @@ Run add_eval_command(CLI::App& app) {
   auto lpips_range = std::make_shared<std::string>("unit");
   auto source = std::make_shared<std::string>();
   if (const char* env = std::getenv("D2GS_LPIPS_WEIGHTS")) *lpips_weights = env;
-  cmd->add_option("-m,--model-path", *model_dir, "Run folder written by d2gs train")->required();
-  cmd->add_option("--iteration", *iteration, "Model iteration to evaluate (default: the last saved)")
-      ->check(CLI::PositiveNumber);
+  add_option(*cmd, "-m,--model-path", *model_dir, "Run folder written by d2gs train")->required();
+  add_option(*cmd, "--iteration", *iteration, "Model iteration to evaluate (default: the last saved)")
+      ->check(at_least(1));
   cmd->add_flag("--json", *json_only, "Print the results as JSON instead of a table");
-  cmd->add_option("-s,--source", *source,
-                  "Scene folder (default: the one recorded in MODEL/config.json; a relative recorded path is taken "
-                  "relative to MODEL, else to the working folder)");
-  cmd->add_option("--lpips-weights", *lpips_weights,
-                  "LPIPS weights (.safetensors, VGG16 or AlexNet; default: $D2GS_LPIPS_WEIGHTS)");
-  cmd->add_option("--lpips-input-range", *lpips_range,
-                  "Images fed to LPIPS: unit = [0,1] as the sparse-view papers, symmetric = [-1,1] as LPIPS")
+  add_option(*cmd, "-s,--source", *source,
+             "Scene folder (default: the one recorded in MODEL/config.json; a relative recorded path is taken "
+             "relative to MODEL, else to the working folder)");
+  add_option(*cmd, "--lpips-weights", *lpips_weights,
+             "LPIPS weights (.safetensors, VGG16 or AlexNet; default: $D2GS_LPIPS_WEIGHTS)");
+  add_option(*cmd, "--lpips-input-range", *lpips_range,
+             "Images fed to LPIPS: unit = [0,1] as the sparse-view papers, symmetric = [-1,1] as LPIPS")
       ->capture_default_str();
   auto image_source = std::make_shared<std::string>();
-  cmd->add_option("--image-source", *image_source,
-                  "Ground-truth images: as the run was trained (default, from its config.json), or 'folder' / "
-                  "'largest' to score the same renders against another source (see d2gs train --image-source)")
+  add_option(*cmd, "--image-source", *image_source,
+             "Ground-truth images: as the run was trained (default, from its config.json), or 'folder' / "
+             "'largest' to score the same renders against another source (see d2gs train --image-source)")
       ->check(CLI::IsMember({"folder", "largest"}));
   auto device = std::make_shared<std::string>();
   add_device_flag(*cmd, *device);

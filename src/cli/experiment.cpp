@@ -224,13 +224,14 @@ Run add_experiment_command(CLI::App& app) {
       "DIR/configs/). Finished runs (results.json) are skipped; an interrupted run resumes from its last\n"
       "checkpoint. Tables: DIR/tables/results.{md,csv}; report: DIR/report.html. Example configs:\n"
       "configs/experiments/. Example: d2gs experiment --config configs/experiments/llff_fern_3views.json -o out/fern --jobs 2");
-  cmd->add_option("--config", o->config, "Experiment file (JSON); without it, DIR/experiment.json is used");
-  cmd->add_option("-o,--output", o->out, "Experiment folder (required)");
-  cmd->add_option("--data-root", o->data_root, "Folder the scene sources are relative to (overrides data_root)");
-  cmd->add_option("-j,--jobs", o->jobs, "Runs trained at once on this machine (child processes)")
-      ->check(CLI::Range(1, 256))->capture_default_str();
-  cmd->add_option("--run-index", o->run_index, "Train only run I (a Slurm array task), without collecting")
-      ->check(CLI::NonNegativeNumber);
+  add_option(*cmd, "--config", o->config, "Experiment file (JSON); without it, DIR/experiment.json is used");
+  add_option(*cmd, "-o,--output", o->out, "Experiment folder (required)");
+  add_option(*cmd, "--data-root", o->data_root, "Folder the scene sources are relative to (overrides data_root)");
+  add_option(*cmd, "-j,--jobs", o->jobs, "Runs trained at once on this machine (child processes)")
+      ->check(in_range(1, 256))
+      ->capture_default_str();
+  add_option(*cmd, "--run-index", o->run_index, "Train only run I (a Slurm array task), without collecting")
+      ->check(at_least(0));
   cmd->add_flag("--list", o->list,
                 "Print the run list and where each run stands (finished with its scores, running with its "
                 "iteration and time left, interrupted with the checkpoint it resumes from, failed with its "
@@ -238,19 +239,19 @@ Run add_experiment_command(CLI::App& app) {
   cmd->add_flag("--collect", o->collect, "Only build the tables and the report from the folder");
   cmd->add_flag("--no-imr", o->no_imr, "Skip the IMR computation when collecting");
   cmd->add_flag("--emit-slurm", o->emit_slurm, "Write DIR/slurm/{runs,collect}.sbatch (a job array), run nothing");
-  cmd->add_option("--slurm-partition", o->slurm.partition, "Slurm partition");
-  cmd->add_option("--slurm-account", o->slurm.account, "Slurm account");
-  cmd->add_option("--slurm-time", o->slurm.time, "Time limit per run")->capture_default_str();
-  cmd->add_option("--slurm-cpus", o->slurm.cpus, "CPUs per run")->capture_default_str();
-  cmd->add_option("--slurm-gpus", o->slurm.gpus, "GPUs per run (--gres=gpu:N)")->capture_default_str();
-  cmd->add_option("--slurm-mem", o->slurm.mem, "Memory per run, e.g. 16G");
-  cmd->add_option("--slurm-max-parallel", o->slurm.max_parallel, "Array throttle: at most N runs at once");
-  cmd->add_option("--slurm-program", o->slurm.program, "d2gs program path on the cluster (default: this one)");
+  add_option(*cmd, "--slurm-partition", o->slurm.partition, "Slurm partition");
+  add_option(*cmd, "--slurm-account", o->slurm.account, "Slurm account");
+  add_option(*cmd, "--slurm-time", o->slurm.time, "Time limit per run")->capture_default_str();
+  add_option(*cmd, "--slurm-cpus", o->slurm.cpus, "CPUs per run")->capture_default_str();
+  add_option(*cmd, "--slurm-gpus", o->slurm.gpus, "GPUs per run (--gres=gpu:N)")->capture_default_str();
+  add_option(*cmd, "--slurm-mem", o->slurm.mem, "Memory per run, e.g. 16G");
+  add_option(*cmd, "--slurm-max-parallel", o->slurm.max_parallel, "Array throttle: at most N runs at once");
+  add_option(*cmd, "--slurm-program", o->slurm.program, "d2gs program path on the cluster (default: this one)");
 
   auto* collect = cmd->add_subcommand("collect", "Build the tables and the report of an experiment folder");
   auto collect_out = std::make_shared<std::string>();
   auto collect_no_imr = std::make_shared<bool>(false);
-  collect->add_option("-o,--output", *collect_out, "Experiment folder")->required();
+  add_option(*collect, "-o,--output", *collect_out, "Experiment folder")->required();
   collect->add_flag("--no-imr", *collect_no_imr, "Skip the IMR computation");
   cmd->require_subcommand(0, 1);
 

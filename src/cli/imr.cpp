@@ -369,47 +369,45 @@ int run_imr(const ImrCommandOptions& o) {
 Run add_imr_command(CLI::App& app) {
   auto o = std::make_shared<ImrCommandOptions>();
   CLI::App* sub = app.add_subcommand("imr", "Inter-Model Robustness of independently trained models (docs/imr.md)");
-  sub->add_option("models", o->inputs, "PLY model files or training run folders (highest point_cloud/iteration_N)")
+  add_option(*sub, "models", o->inputs, "PLY model files or training run folders (highest point_cloud/iteration_N)")
       ->required();
-  sub->add_option("-s,--source", o->source, "Scene whose camera is the depth-strata reference (metadata only)");
+  add_option(*sub, "-s,--source", o->source, "Scene whose camera is the depth-strata reference (metadata only)");
   add_resolution_flag(*sub, o->resolution);
-  sub->add_option("--reference-camera", o->reference_camera, "Camera index in the scene (0 = release: image 0)")
+  add_option(*sub, "--reference-camera", o->reference_camera, "Camera index in the scene (0 = release: image 0)")
       ->capture_default_str();
-  sub->add_option("--epsilon", o->epsilon, "Entropic regularisation (on the normalised cost)")->capture_default_str();
-  sub->add_option("--samples", o->samples, "Depth-strata sample count n (0 = all Gaussians)")
-      ->capture_default_str()
-      ->check(not_negative());
-  sub->add_option("--strata-phase", o->strata_phase,
-                  "Start each depth third's stride k ranks later (k mod its stride; 0 = the release's subsample): "
-                  "IMR of other subsamples, to see how much it depends on the one taken (docs/imr.md)")
-      ->capture_default_str()
-      ->check(not_negative());
-  sub->add_option("--tolerance", o->tolerance, "Stop when the log-potentials change less than this")
+  add_option(*sub, "--epsilon", o->epsilon, "Entropic regularisation (on the normalised cost)")->capture_default_str();
+  add_option(*sub, "--samples", o->samples, "Depth-strata sample count n (0 = all Gaussians)")->capture_default_str();
+  add_option(*sub, "--strata-phase", o->strata_phase,
+             "Start each depth third's stride k ranks later (k mod its stride; 0 = the release's subsample): "
+             "IMR of other subsamples, to see how much it depends on the one taken (docs/imr.md)")
       ->capture_default_str();
-  sub->add_option("--marginal-tolerance", o->marginal_tolerance,
-                  "Also stop when the plan's L1 marginal error is below this (0 = off): ends solves whose low-mass "
-                  "components' potentials drift while the plan no longer changes (docs/imr.md)")
+  add_option(*sub, "--tolerance", o->tolerance, "Stop when the log-potentials change less than this")
       ->capture_default_str();
-  sub->add_option("--max-iterations", o->max_iterations, "Sinkhorn iteration limit")->capture_default_str();
+  add_option(*sub, "--marginal-tolerance", o->marginal_tolerance,
+             "Also stop when the plan's L1 marginal error is below this (0 = off): ends solves whose low-mass "
+             "components' potentials drift while the plan no longer changes (docs/imr.md)")
+      ->capture_default_str();
+  add_option(*sub, "--max-iterations", o->max_iterations, "Sinkhorn iteration limit")->capture_default_str();
   sub->add_flag("--exact-bures", o->exact_bures, "Exact Bures shape term instead of the release's Taylor form");
   sub->add_flag("--debiased", o->debiased, "Also compute S(A,A), S(B,B) and the debiased divergence");
-  sub->add_option("--cost", o->cost, "Cost matrix: stored (float), stored-double or on-the-fly")->capture_default_str();
+  add_option(*sub, "--cost", o->cost, "Cost matrix: stored (float), stored-double or on-the-fly")
+      ->capture_default_str();
   sub->add_flag("--no-clamp", o->no_clamp, "Do not clamp the shape term to [0, max position term]");
   sub->add_flag("--no-normalize", o->no_normalize, "Do not divide the cost by its mean (epsilon in raw units)");
   sub->add_flag("--epsilon-scaling,!--no-epsilon-scaling", o->epsilon_scaling,
                 "Anneal epsilon from the largest cost down (warm starts; default on): the same plan in "
                 "far fewer iterations; --no-epsilon-scaling solves at epsilon from the start");
-  sub->add_option("--anderson", o->anderson,
-                  "Anderson acceleration depth (0 = plain Sinkhorn); the solve still ends on plain iterations with "
-                  "the same stopping rule")
+  add_option(*sub, "--anderson", o->anderson,
+             "Anderson acceleration depth (0 = plain Sinkhorn); the solve still ends on plain iterations with "
+             "the same stopping rule")
       ->capture_default_str();
-  sub->add_option("--anderson-max-restarts", o->anderson_max_restarts,
-                  "Safeguard restarts after which an epsilon stage goes on with plain iterations (-1: no limit)")
+  add_option(*sub, "--anderson-max-restarts", o->anderson_max_restarts,
+             "Safeguard restarts after which an epsilon stage goes on with plain iterations (-1: no limit)")
       ->capture_default_str();
-  sub->add_option("--epsilon-factor", o->epsilon_factor, "epsilon-scaling: ratio of successive epsilon stages")
+  add_option(*sub, "--epsilon-factor", o->epsilon_factor, "epsilon-scaling: ratio of successive epsilon stages")
       ->capture_default_str();
-  sub->add_option("--stage-tolerance", o->stage_tolerance,
-                  "epsilon-scaling: potential change that ends an intermediate stage")
+  add_option(*sub, "--stage-tolerance", o->stage_tolerance,
+             "epsilon-scaling: potential change that ends an intermediate stage")
       ->capture_default_str();
   sub->add_flag("--plain-solver", o->plain_solver,
                 "Plain Sinkhorn, epsilon halved per stage, intermediate stages to 1e-2 (the default before the "
@@ -417,13 +415,13 @@ Run add_imr_command(CLI::App& app) {
   sub->add_flag("--accelerated", o->accelerated,
                 "Anderson acceleration (depth 10, no restart cap), epsilon /4 per stage, intermediate stages to 0.1: "
                 "the same plan and stopping rule in fewer iterations (the default; docs/imr.md)");
-  sub->add_option("--solver", o->solver,
-                  "Sinkhorn iterations: kernel (stabilised scaling form: a float kernel stored once per absorption, "
-                  "matrix-vector products per iteration) or log-domain (a log-sum-exp per entry per half-iteration); "
-                  "the same problem and stopping rule (docs/imr.md)")
+  add_option(*sub, "--solver", o->solver,
+             "Sinkhorn iterations: kernel (stabilised scaling form: a float kernel stored once per absorption, "
+             "matrix-vector products per iteration) or log-domain (a log-sum-exp per entry per half-iteration); "
+             "the same problem and stopping rule (docs/imr.md)")
       ->capture_default_str();
-  sub->add_option("--threads", o->threads, "OpenMP threads (0 = automatic)")->capture_default_str();
-  sub->add_option("--json", o->json, "Write every number to this JSON file");
+  add_option(*sub, "--threads", o->threads, "OpenMP threads (0 = automatic)")->capture_default_str();
+  add_option(*sub, "--json", o->json, "Write every number to this JSON file");
   return [o]() -> int { return run_imr(*o); };
 }
 

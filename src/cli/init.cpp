@@ -48,112 +48,111 @@ Run add_init_command(CLI::App& app) {
       "Example: d2gs init -s ../shared/data/nerf_llff_data/fern --n-views 3 -r 8 -o out/fern_init");
   auto o = std::make_shared<InitOptions>();
   add_scene_flags(*cmd, o->scene, SplitFlags::All);
-  cmd->add_option("-o,--output", o->output, "Output folder (default: SCENE/{N}_views)");
-  cmd->add_option("--seed", o->geometry.seed, "Seed of the random choices (subsampling of large dense clouds)")
-      ->check(not_negative());
-  cmd->add_option("--max-features", o->geometry.max_features, "SIFT keypoints per view");
-  cmd->add_option("--sift-contrast", o->geometry.sift_contrast_threshold,
-                  "SIFT contrast threshold (lower: more keypoints in weak texture)");
-  cmd->add_option("--match-ratio", o->geometry.match.ratio, "Lowe's ratio test threshold");
+  add_option(*cmd, "-o,--output", o->output, "Output folder (default: SCENE/{N}_views)");
+  add_option(*cmd, "--seed", o->geometry.seed, "Seed of the random choices (subsampling of large dense clouds)");
+  add_option(*cmd, "--max-features", o->geometry.max_features, "SIFT keypoints per view");
+  add_option(*cmd, "--sift-contrast", o->geometry.sift_contrast_threshold,
+             "SIFT contrast threshold (lower: more keypoints in weak texture)");
+  add_option(*cmd, "--match-ratio", o->geometry.match.ratio, "Lowe's ratio test threshold");
   cmd->add_flag("--guided-matching", o->geometry.match.guided,
                 "Search descriptors only along the epipolar lines (more points, more outliers) instead of over the "
                 "whole image followed by the epipolar filter");
-  cmd->add_option("--epipolar-px", o->geometry.match.epipolar_px,
-                  "Epipolar filter threshold in pixels (≤ 0: 0.4 % of the image diagonal)");
-  cmd->add_option("--max-reprojection-px", o->geometry.triangulation.max_reprojection_px,
-                  "Largest reprojection error of a triangulated point");
-  cmd->add_option("--min-angle", o->geometry.triangulation.min_angle_deg, "Smallest triangulation angle (degrees)");
+  add_option(*cmd, "--epipolar-px", o->geometry.match.epipolar_px,
+             "Epipolar filter threshold in pixels (≤ 0: 0.4 % of the image diagonal)");
+  add_option(*cmd, "--max-reprojection-px", o->geometry.triangulation.max_reprojection_px,
+             "Largest reprojection error of a triangulated point");
+  add_option(*cmd, "--min-angle", o->geometry.triangulation.min_angle_deg, "Smallest triangulation angle (degrees)");
   cmd->add_flag("--no-dense", o->no_dense, "Sparse points only (no stereo, no depth maps)");
-  cmd->add_option("--dense-method", o->dense_method,
-                  "'patchmatch' (default: PatchMatch multi-view stereo with geometric consistency and COLMAP-like "
-                  "fusion, at the highest resolution of the scene folder) or 'sgbm' (rectified semi-global "
-                  "matching between neighbouring views at the training resolution: seconds instead of a minute "
-                  "or two, about 1.5 dB less on fern)")
+  add_option(*cmd, "--dense-method", o->dense_method,
+             "'patchmatch' (default: PatchMatch multi-view stereo with geometric consistency and COLMAP-like "
+             "fusion, at the highest resolution of the scene folder) or 'sgbm' (rectified semi-global "
+             "matching between neighbouring views at the training resolution: seconds instead of a minute "
+             "or two, about 1.5 dB less on fern)")
       ->check(CLI::IsMember({"sgbm", "patchmatch"}));
-  cmd->add_option("--geometry-resolution", o->geometry_resolution,
-                  "Images the geometry is computed from: 'training' (-r), 'highest' (the largest image folder, "
-                  "capped by --max-image-size) or 'auto' (default: highest for patchmatch, training for sgbm)")
+  add_option(*cmd, "--geometry-resolution", o->geometry_resolution,
+             "Images the geometry is computed from: 'training' (-r), 'highest' (the largest image folder, "
+             "capped by --max-image-size) or 'auto' (default: highest for patchmatch, training for sgbm)")
       ->check(CLI::IsMember({"auto", "training", "highest"}));
-  cmd->add_option("--max-image-size", o->geometry.max_image_size,
-                  "Cap on the longest image side at the highest resolution: the folder is divided by 2, 4, 8 until it "
-                  "fits (≤ 0: no cap)")
+  add_option(*cmd, "--max-image-size", o->geometry.max_image_size,
+             "Cap on the longest image side at the highest resolution: the folder is divided by 2, 4, 8 until it "
+             "fits (≤ 0: no cap)")
       ->capture_default_str();
-  cmd->add_option("--stereo-neighbors", o->geometry.stereo_neighbors,
-                  "SGBM: stereo partners of each view (nearest centres)");
-  cmd->add_option("--fusion-tolerance", o->geometry.fusion.relative_tolerance,
-                  "SGBM: relative depth difference within which two views agree");
-  cmd->add_option("--dense-stride", o->dense_stride,
-                  "Pixel stride of the fused cloud (default: 4 for sgbm; patchmatch: every point whose first pixel "
-                  "lies on this grid, default 3)");
+  add_option(*cmd, "--stereo-neighbors", o->geometry.stereo_neighbors,
+             "SGBM: stereo partners of each view (nearest centres)");
+  add_option(*cmd, "--fusion-tolerance", o->geometry.fusion.relative_tolerance,
+             "SGBM: relative depth difference within which two views agree");
+  add_option(*cmd, "--dense-stride", o->dense_stride,
+             "Pixel stride of the fused cloud (default: 4 for sgbm; patchmatch: every point whose first pixel "
+             "lies on this grid, default 3)");
   auto& pm = o->geometry.patch_match;
-  cmd->add_option("--pm-levels", pm.levels, "PatchMatch: pyramid levels (1: full size only)")->capture_default_str();
-  cmd->add_option("--pm-iterations", pm.iterations, "PatchMatch: red-black iterations at the coarsest level")
+  add_option(*cmd, "--pm-levels", pm.levels, "PatchMatch: pyramid levels (1: full size only)")->capture_default_str();
+  add_option(*cmd, "--pm-iterations", pm.iterations, "PatchMatch: red-black iterations at the coarsest level")
       ->capture_default_str();
-  cmd->add_option("--pm-fine-iterations", pm.fine_iterations, "PatchMatch: refining iterations at each finer level")
+  add_option(*cmd, "--pm-fine-iterations", pm.fine_iterations, "PatchMatch: refining iterations at each finer level")
       ->capture_default_str();
-  cmd->add_option("--pm-geometric-iterations", pm.geometric_iterations,
-                  "PatchMatch: iterations of the geometric-consistency stage (0: none)")
+  add_option(*cmd, "--pm-geometric-iterations", pm.geometric_iterations,
+             "PatchMatch: iterations of the geometric-consistency stage (0: none)")
       ->capture_default_str();
-  cmd->add_option("--pm-window-radius", pm.window_radius, "PatchMatch: NCC window radius")->capture_default_str();
-  cmd->add_option("--pm-window-step", pm.window_step, "PatchMatch: NCC window sampling step")->capture_default_str();
-  cmd->add_option("--pm-min-consistent", pm.filter_min_consistent,
-                  "PatchMatch: source views that must agree for a depth to be kept (0: no filter)")
+  add_option(*cmd, "--pm-window-radius", pm.window_radius, "PatchMatch: NCC window radius")->capture_default_str();
+  add_option(*cmd, "--pm-window-step", pm.window_step, "PatchMatch: NCC window sampling step")->capture_default_str();
+  add_option(*cmd, "--pm-min-consistent", pm.filter_min_consistent,
+             "PatchMatch: source views that must agree for a depth to be kept (0: no filter)")
       ->capture_default_str();
-  cmd->add_option("--pm-filter-min-angle", pm.filter_min_triangulation_angle_deg,
-                  "PatchMatch: smallest triangulation angle (degrees) of a source that confirms a depth (COLMAP's "
-                  "filter_min_triangulation_angle; 0: any angle, as COLMAP before its fix of 2026-02 effectively "
-                  "filtered)")
+  add_option(*cmd, "--pm-filter-min-angle", pm.filter_min_triangulation_angle_deg,
+             "PatchMatch: smallest triangulation angle (degrees) of a source that confirms a depth (COLMAP's "
+             "filter_min_triangulation_angle; 0: any angle, as COLMAP before its fix of 2026-02 effectively "
+             "filtered)")
       ->capture_default_str();
-  cmd->add_option("--pm-filter-geom-px", pm.filter_geom_max_px,
-                  "PatchMatch: largest forward-backward reprojection error (pixels) of a source that confirms a "
-                  "depth (COLMAP's filter_geom_consistency_max_cost)")
+  add_option(*cmd, "--pm-filter-geom-px", pm.filter_geom_max_px,
+             "PatchMatch: largest forward-backward reprojection error (pixels) of a source that confirms a "
+             "depth (COLMAP's filter_geom_consistency_max_cost)")
       ->capture_default_str();
-  cmd->add_option("--pm-filter-min-ncc", pm.filter_min_ncc,
-                  "PatchMatch: smallest NCC of a source that confirms a depth (COLMAP's filter_min_ncc)")
+  add_option(*cmd, "--pm-filter-min-ncc", pm.filter_min_ncc,
+             "PatchMatch: smallest NCC of a source that confirms a depth (COLMAP's filter_min_ncc)")
       ->capture_default_str();
-  cmd->add_option("--pm-filter-min-distinctiveness", pm.filter_min_distinctiveness,
-                  "PatchMatch: smallest rise of a confirming source's cost (1 - NCC) when the match moves "
-                  "--pm-filter-distinct-px either way along its epipolar line (0: off; ours, not COLMAP's): drops "
-                  "depths the images do not determine (no texture across the epipolar line)")
+  add_option(*cmd, "--pm-filter-min-distinctiveness", pm.filter_min_distinctiveness,
+             "PatchMatch: smallest rise of a confirming source's cost (1 - NCC) when the match moves "
+             "--pm-filter-distinct-px either way along its epipolar line (0: off; ours, not COLMAP's): drops "
+             "depths the images do not determine (no texture across the epipolar line)")
       ->capture_default_str();
-  cmd->add_option("--pm-filter-distinct-px", pm.filter_distinct_shift_px,
-                  "PatchMatch: the shift (pixels) of the distinctiveness test (the window radius)")
+  add_option(*cmd, "--pm-filter-distinct-px", pm.filter_distinct_shift_px,
+             "PatchMatch: the shift (pixels) of the distinctiveness test (the window radius)")
       ->capture_default_str();
   cmd->add_flag("--pm-filter-distinct-aperture", pm.filter_distinct_aperture,
                 "PatchMatch: the distinctiveness test drops a depth only where the window has structure across "
                 "the epipolar line (its cost also rises by the threshold when the match moves the same shift "
                 "perpendicular to the line: the aperture problem), not where it is flat in every direction");
-  cmd->add_option("--pm-filter-min-uniqueness", pm.filter_min_uniqueness,
-                  "PatchMatch: smallest margin (in 1 - NCC) by which a confirming source's match must beat every "
-                  "other match on its epipolar line more than two window radii away (0: off; ours, not COLMAP's): "
-                  "drops depths that a repeated pattern, a reflection or a uniform region leaves ambiguous")
+  add_option(*cmd, "--pm-filter-min-uniqueness", pm.filter_min_uniqueness,
+             "PatchMatch: smallest margin (in 1 - NCC) by which a confirming source's match must beat every "
+             "other match on its epipolar line more than two window radii away (0: off; ours, not COLMAP's): "
+             "drops depths that a repeated pattern, a reflection or a uniform region leaves ambiguous")
       ->capture_default_str();
-  cmd->add_option("--pm-filter-uniqueness-step", pm.filter_uniqueness_step,
-                  "PatchMatch: the uniqueness test's sampling interval along the epipolar line, in window radii")
+  add_option(*cmd, "--pm-filter-uniqueness-step", pm.filter_uniqueness_step,
+             "PatchMatch: the uniqueness test's sampling interval along the epipolar line, in window radii")
       ->capture_default_str();
-  cmd->add_option("--fusion-min-pixels", o->geometry.patch_match_fusion.min_pixels,
-                  "PatchMatch fusion: pixels (across views) a fused point needs")
+  add_option(*cmd, "--fusion-min-pixels", o->geometry.patch_match_fusion.min_pixels,
+             "PatchMatch fusion: pixels (across views) a fused point needs")
       ->capture_default_str();
-  cmd->add_option("--fusion-max-normal", o->geometry.patch_match_fusion.max_normal_deg,
-                  "PatchMatch fusion: largest angle (degrees) between a pixel's normal and the point's first "
-                  "pixel's (COLMAP's max_normal_error)")
+  add_option(*cmd, "--fusion-max-normal", o->geometry.patch_match_fusion.max_normal_deg,
+             "PatchMatch fusion: largest angle (degrees) between a pixel's normal and the point's first "
+             "pixel's (COLMAP's max_normal_error)")
       ->capture_default_str();
-  cmd->add_option("--fusion-max-depth-error", o->geometry.patch_match_fusion.max_relative_depth,
-                  "PatchMatch fusion: largest relative depth difference of a pixel to the point (COLMAP's "
-                  "max_depth_error)")
+  add_option(*cmd, "--fusion-max-depth-error", o->geometry.patch_match_fusion.max_relative_depth,
+             "PatchMatch fusion: largest relative depth difference of a pixel to the point (COLMAP's "
+             "max_depth_error)")
       ->capture_default_str();
-  cmd->add_option("--fusion-max-reprojection-px", o->geometry.patch_match_fusion.max_reprojection_px,
-                  "PatchMatch fusion: largest reprojection error (pixels) of the point into a joining pixel "
-                  "(COLMAP's max_reproj_error)")
+  add_option(*cmd, "--fusion-max-reprojection-px", o->geometry.patch_match_fusion.max_reprojection_px,
+             "PatchMatch fusion: largest reprojection error (pixels) of the point into a joining pixel "
+             "(COLMAP's max_reproj_error)")
       ->capture_default_str();
-  cmd->add_option("--fusion-max-color-difference", o->geometry.patch_match_fusion.max_color_difference,
-                  "PatchMatch fusion: drop a fused point whose colour differs from the (blurred) image by more than "
-                  "this mean absolute RGB difference in a view where no surface hides it (0: off; ours, not "
-                  "COLMAP's; SGBM ignores it: docs/training.md)")
+  add_option(*cmd, "--fusion-max-color-difference", o->geometry.patch_match_fusion.max_color_difference,
+             "PatchMatch fusion: drop a fused point whose colour differs from the (blurred) image by more than "
+             "this mean absolute RGB difference in a view where no surface hides it (0: off; ours, not "
+             "COLMAP's; SGBM ignores it: docs/training.md)")
       ->capture_default_str();
-  cmd->add_option("--compare-cloud", o->compare_cloud,
-                  "Also measure the dense cloud against this PLY (e.g. another pipeline's fused cloud): accuracy "
-                  "(ours to theirs) and completeness (theirs to ours), written to DIR/compare_cloud.json");
+  add_option(*cmd, "--compare-cloud", o->compare_cloud,
+             "Also measure the dense cloud against this PLY (e.g. another pipeline's fused cloud): accuracy "
+             "(ours to theirs) and completeness (theirs to ours), written to DIR/compare_cloud.json");
   cmd->add_flag("--oracle-accuracy", o->oracle_accuracy,
                 "Also measure the clouds against the dataset's all-view SfM points (measurement only)");
   return [o]() -> int {

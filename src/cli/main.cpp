@@ -3,12 +3,37 @@
 #include <exception>
 #include <filesystem>
 #include <map>
+#include <regex>
 #include <string>
 
 #include "cli/commands.hpp"
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/interrupt.hpp"
 #include "d2gs/core/log.hpp"
+
+namespace {
+
+// What CLI11 says of a command line it cannot parse, in the words of d2gs's other errors (one line, the
+// option named first): a failed check of cli/option_checks.hpp is "option --NAME: PROBLEM" or "option --NAME must
+// be ..." as d2gs train says them, a repeated option "--NAME given twice", an option without its value "--NAME
+// needs a value", a value CLI11 cannot convert "--NAME: 'WORD' is not a valid value"; other messages stay.
+std::string parse_error_message(const CLI::ParseError& e) {
+  const std::string what = e.what();
+  std::smatch m;
+  static const std::regex at_most(R"(^(\S+): At Most \d+ required but received (\d+)$)");
+  static const std::regex missing(R"(^(\S+): \d+ required \S+ missing$)");
+  static const std::regex conversion(R"(^Could not convert: (\S+) = (.*)$)");
+  static const std::regex check(R"(^(-\S+): (.*)$)");
+  if (dynamic_cast<const CLI::ValidationError*>(&e) && std::regex_match(what, m, check))
+    return "option " + m[1].str() + (m[2].str().rfind("must be", 0) == 0 ? " " : ": ") + m[2].str();
+  if (std::regex_match(what, m, at_most))
+    return m[1].str() + " given " + (m[2].str() == "2" ? std::string("twice") : m[2].str() + " times");
+  if (std::regex_match(what, m, missing)) return m[1].str() + " needs a value";
+  if (std::regex_match(what, m, conversion)) return m[1].str() + ": '" + m[2].str() + "' is not a valid value";
+  return what;
+}
+
+}  // namespace
 
 int main(int argc, char** argv) {
   CLI::App app{
@@ -40,6 +65,7 @@ int main(int argc, char** argv) {
   add(d2gs::cli::add_experiment_command);
 
   // The first word that is no option names the command: say which words would have been one.
+  std::string command;
   for (int i = 1; i < argc; ++i) {
     const std::string word = argv[i];
     if (word.empty() || word[0] == '-') continue;
@@ -53,12 +79,17 @@ int main(int argc, char** argv) {
       std::fprintf(stderr, "d2gs: error: unknown command '%s' (commands: %s; d2gs --help)\n", word.c_str(), known.c_str());
       return 2;
     }
+    command = word;
     break;
   }
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    // --help and --version: CLI11 prints them and exits 0. A bad command line: one line, exit 1 as for d2gs::Error.
+    if (e.get_exit_code() == static_cast<int>(CLI::ExitCodes::Success)) return app.exit(e);
+    std::fprintf(stderr, "d2gs: error: %s%s\n", command.empty() ? "" : (command + ": ").c_str(),
+                 parse_error_message(e).c_str());
+    return 1;
   }
   d2gs::set_verbosity(quiet ? d2gs::Verbosity::Quiet : verbose ? d2gs::Verbosity::Verbose : d2gs::Verbosity::Normal);
   try {

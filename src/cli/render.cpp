@@ -148,15 +148,15 @@ int run_render(const RenderCommandOptions& o) {
 Run add_render_command(CLI::App& app) {
   auto opts = std::make_shared<RenderCommandOptions>();
   CLI::App* sub = app.add_subcommand("render", "Render a trained model from a scene's cameras (one PNG per view)");
-  sub->add_option("--model,-m", opts->model, "Model PLY (e.g. MODEL_DIR/point_cloud/iteration_10000/point_cloud.ply)")
+  add_option(*sub, "--model,-m", opts->model, "Model PLY (e.g. MODEL_DIR/point_cloud/iteration_10000/point_cloud.ply)")
       ->required()
       ->check(CLI::ExistingFile);
   add_scene_flags(*sub, opts->scene, SplitFlags::NViews);
-  sub->add_option("-o,--output", opts->output, "Output folder")->required();
-  sub->add_option("--split", opts->split, "Views to render: test, train or all")->capture_default_str();
-  sub->add_option("--sh-degree", opts->sh_degree, "Active SH degree, 0..3 and at most the model's (-1 = the model's)")
+  add_option(*sub, "-o,--output", opts->output, "Output folder")->required();
+  add_option(*sub, "--split", opts->split, "Views to render: test, train or all")->capture_default_str();
+  add_option(*sub, "--sh-degree", opts->sh_degree, "Active SH degree, 0..3 and at most the model's (-1 = the model's)")
       ->capture_default_str()
-      ->check(CLI::Range(-1, 3));
+      ->check(in_range(-1, 3));
   sub->add_flag("--depth", opts->depth,
                 "Also write <name>_depth.npy (float32, view-space z / alpha) and <name>_depth.png (16-bit, z*1000)");
   sub->add_flag("--alpha", opts->alpha, "Also write <name>_alpha.png (8-bit accumulated opacity)");

@@ -15,8 +15,8 @@ Run add_report_command(CLI::App& app) {
               "Example: d2gs report -m out/fern_d2gs   (writes out/fern_d2gs/report.html)");
   auto model_dir = std::make_shared<std::string>();
   auto output = std::make_shared<std::string>();
-  cmd->add_option("-m,--model-path", *model_dir, "Run folder written by d2gs train")->required();
-  cmd->add_option("-o,--output", *output, "HTML file to write (default: MODEL/report.html)");
+  add_option(*cmd, "-m,--model-path", *model_dir, "Run folder written by d2gs train")->required();
+  add_option(*cmd, "-o,--output", *output, "HTML file to write (default: MODEL/report.html)");
   return [model_dir, output]() -> int {
     const auto path = report::write_run_report(*model_dir, *output);
     std::printf("written %s\n", path.c_str());

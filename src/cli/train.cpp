@@ -28,11 +28,11 @@ Run add_train_command(CLI::App& app) {
       "Example: d2gs train -s ../shared/data/nerf_llff_data/fern -m out/fern_3dgs -r 8 --n-views 3 --method 3dgs");
   auto config_file = std::make_shared<std::string>();
   auto resume = std::make_shared<std::string>();
-  cmd->add_option("--config", *config_file, "JSON file of options (keys as in a saved config.json); flags override it")
+  add_option(*cmd, "--config", *config_file, "JSON file of options (keys as in a saved config.json); flags override it")
       ->group("Run");
-  cmd->add_option("--resume", *resume,
-                  "Continue from a checkpoint (chkpntN.bin) bit-identically: the same scene, -r, split and training "
-                  "options, --iterations at least the checkpoint's (anything else is refused: docs/formats.md)")
+  add_option(*cmd, "--resume", *resume,
+             "Continue from a checkpoint (chkpntN.bin) bit-identically: the same scene, -r, split and training "
+             "options, --iterations at least the checkpoint's (anything else is refused: docs/formats.md)")
       ->group("Run");
   // Every training option from its one declaration (train/options.hpp): flag, former names, help, range
   // and default. What the command line gives becomes config.json keys over the --config file.

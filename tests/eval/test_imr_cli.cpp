@@ -188,7 +188,7 @@ TEST(ImrCli, OptionsAreCheckedBeforeTheModelsAreLoaded) {
            {"--epsilon -1", "--epsilon must be positive"},
            {"--tolerance -1", "--tolerance"},
            {"--marginal-tolerance -1e-7", "--marginal-tolerance must be ≥ 0"},
-           {"--marginal-tolerance nan", "--marginal-tolerance must be ≥ 0"},
+           {"--marginal-tolerance nan", "option --marginal-tolerance: 'nan' is not a finite number"},
            {"--max-iterations 0", "--max-iterations"},
            {"--reference-camera -2", "--reference-camera"},
            {"--threads -1", "--threads"},
@@ -197,7 +197,15 @@ TEST(ImrCli, OptionsAreCheckedBeforeTheModelsAreLoaded) {
            {"--epsilon-factor 1", "--epsilon-factor must be in (0, 1)"},
            {"--stage-tolerance 0", "--stage-tolerance must be positive"},
            {"--plain-solver --accelerated", "exclude each other"},
-           {"-s somewhere -r 3", "1, 2, 4 or 8"}}) {
+           {"-s somewhere -r 3", "1, 2, 4 or 8"},
+           // Read by CLI11 as 0, or clamped to 2^64 - 1: refused as d2gs train refuses them.
+           {"--samples ''", "d2gs: error: imr: option --samples: '' is not a whole number ≥ 0\n"},
+           {"--samples 99999999999999999999999",
+            "option --samples: '99999999999999999999999' is not a whole number ≥ 0"},
+           {"--strata-phase 18446744073709551616",
+            "option --strata-phase: '18446744073709551616' is not a whole number ≥ 0"},
+           {"--max-iterations 10 --max-iterations 20", "d2gs: error: imr: --max-iterations given twice\n"},
+           {"--json ''", "option --json: must not be empty"}}) {
     const auto r = test::run_cli("imr " + models + " " + option);
     EXPECT_EQ(r.exit_code, 1) << option << "\n" << r.output;
     EXPECT_NE(r.output.find(expected), std::string::npos) << option << "\n" << r.output;

@@ -205,7 +205,7 @@ TEST(TrainingGeometry, InitCommandWritesTheLayoutAndTheTrainerLoadsItsDepthPrior
   // "views do not overlap enough", or wrote an empty fused cloud).
   for (const auto& [args, message] : std::vector<std::pair<std::string, std::string>>{
            {"--fusion-tolerance -1", "option --fusion-tolerance must be in (0, 1] (got -1)"},
-           {"--fusion-tolerance nan", "option --fusion-tolerance must be in (0, 1] (got nan)"},
+           {"--fusion-tolerance nan", "init: option --fusion-tolerance: 'nan' is not a finite number"},
            {"--max-features 0", "option --max-features must be ≥ 1 (got 0)"},
            {"--match-ratio 5", "option --match-ratio must be in (0, 1] (got 5)"},
            {"--min-angle 200", "option --min-angle must be in [0, 90) degrees (got 200)"},

@@ -173,5 +173,61 @@ TEST(Cli, UnknownCommandIsNamed) {
   EXPECT_EQ(test::run_cli("-q --version").exit_code, 0);
 }
 
+// What CLI11 cannot parse, and the option checks of the other commands (cli/option_checks.hpp): one line
+// "d2gs: error: COMMAND: ..." in train's words, exit 1 (CLI11 printed two lines, without the prefix, with its own
+// exit codes 104-114, and "Value 0 not in range 0.000000 to 1797693134862315708...").
+TEST(Cli, ParseErrorsAreOneLineInTrainsWords) {
+  const auto dir = test::scratch_dir();
+  const std::string fern = (test::shared_data() / "nerf_llff_data/fern").string();
+  const std::string run = (dir / "run").string();
+  const std::string big = "18446744073709551616";  // 2^64: CLI11 clamped it to 2^64 - 1
+  for (const auto& [args, expected] : std::vector<std::pair<std::string, std::string>>{
+           {"eval -m '" + run + "' --iteration 0", "eval: option --iteration must be ≥ 1 (got 0)"},
+           {"eval -m '" + run + "' --iteration ''", "eval: option --iteration: '' is not an integer"},
+           {"info -s '" + fern + "' -r nan", "info: option --resolution: 'nan' is not an integer"},
+           {"info -s '" + fern + "' -r 8 --train-views ''", "info: option --train-views: '' is not an integer"},
+           {"info -s '" + fern + "' -r 8 --n-views 0x3", "info: option --n-views: '0x3' is not an integer"},
+           {"info -s '" + fern + "' -r 8 -r 8", "info: --resolution given twice"},
+           {"train -s '" + fern + "' -m '" + run + "' -r 8 -r 8", "train: --resolution given twice"},
+           {"train -s '" + fern + "' -m '" + run + "' --n-views 3 --n-views 3 --n-views 3",
+            "train: --n-views given 3 times"},
+           {"train -s '" + fern + "' -m '" + run + "' --resume ''", "train: option --resume: must not be empty"},
+           {"train -s '" + fern + "' -m '" + run + "' --config ''", "train: option --config: must not be empty"},
+           {"report -m '" + run + "' -o ''", "report: option --output: must not be empty"},
+           {"demo -o '" + run + "' --scene-only --seed " + big,
+            "demo: option --seed: '" + big + "' is not a whole number ≥ 0"},
+           {"demo -o '" + run + "' --scene-only --seed -1", "demo: option --seed: '-1' is not a whole number ≥ 0"},
+           {"demo -o '" + run + "' --scene-only --views 1", "demo: option --views must be in [2, 1000] (got 1)"},
+           {"init -s '" + fern + "' -r 8 --n-views 3 --no-dense -o '" + run + "' --seed " + big,
+            "init: option --seed: '" + big + "' is not a whole number ≥ 0"},
+           {"init -s '" + fern + "' -r 8 --n-views 3 --no-dense -o '" + run + "' --min-angle x",
+            "init: option --min-angle: 'x' is not a number"},
+           {"render -m '" + fern + "/poses_bounds.npy' -s '" + fern + "' -o '" + run + "' --sh-degree 4",
+            "render: option --sh-degree must be in [-1, 3] (got 4)"},
+           {"experiment -o '" + run + "' --run-index -2", "experiment: option --run-index must be ≥ 0 (got -2)"},
+           {"experiment -o '" + run + "' --jobs 0", "experiment: option --jobs must be in [1, 256] (got 0)"},
+           {"info -s", "info: --source needs a value"}}) {
+    const auto r = test::run_cli(args);
+    EXPECT_EQ(r.exit_code, 1) << args << "\n" << r.output;
+    EXPECT_EQ(r.output, "d2gs: error: " + expected + "\n") << args;
+    EXPECT_FALSE(std::filesystem::exists(dir / "run")) << args;
+  }
+  // Valid values pass the checks: these end at the command's own error (no run folder), not at the option.
+  for (const std::string& args : {"eval -m '" + run + "' --iteration 1", "report -m '" + run + "' -o x.html"}) {
+    const auto r = test::run_cli(args);
+    EXPECT_EQ(r.exit_code, 1) << args << "\n" << r.output;
+    EXPECT_EQ(r.output.find("option"), std::string::npos) << args << "\n" << r.output;
+    EXPECT_NE(r.output.find(run), std::string::npos) << args << "\n" << r.output;
+  }
+  const auto valid = test::run_cli("-q info -s '" + fern + "' -r 8 --train-views 1,10,19 --json");
+  EXPECT_EQ(valid.exit_code, 0) << valid.output;
+  // --help is still help, exit 0.
+  for (const char* args : {"eval --help", "imr --help", "demo --help", "--help"}) {
+    const auto help = test::run_cli(args);
+    EXPECT_EQ(help.exit_code, 0) << args << "\n" << help.output;
+    EXPECT_NE(help.output.find("Usage:"), std::string::npos) << args << "\n" << help.output;
+  }
+}
+
 }  // namespace
 }  // namespace d2gs

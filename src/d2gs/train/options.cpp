@@ -1,7 +1,6 @@
 #include "d2gs/train/options.hpp"
 
 #include <algorithm>
-#include <charconv>
 #include <cmath>
 #include <optional>
 #include <type_traits>
@@ -12,6 +11,7 @@
 
 #include "d2gs/core/error.hpp"
 #include "d2gs/core/json_value.hpp"
+#include "d2gs/core/number_word.hpp"
 #include "d2gs/train/config.hpp"
 #include "d2gs/train/methods/registry.hpp"
 #include "d2gs/train/presets.hpp"
@@ -99,20 +99,12 @@ const std::string& one_word(const std::vector<std::string>& words, const std::st
   return words.front();
 }
 
-// A command-line word as a number of type T: all of it, no sign on an unsigned type.
+// A command-line word as a number of type T (core/number_word.hpp: all of it, no sign on an unsigned type).
 template <typename T>
 T number_word(const std::string& word, const std::string& flag_name) {
   T value{};
-  const char* end = word.data() + word.size();
-  const auto [ptr, ec] = std::from_chars(word.data(), end, value);
-  if (ec != std::errc() || ptr != end) {
-    if constexpr (std::is_integral_v<T>)
-      fail("option {}: '{}' is not {}", flag_name, word, std::is_unsigned_v<T> ? "a whole number ≥ 0" : "an integer");
-    else
-      fail("option {}: '{}' is not a number", flag_name, word);
-  }
-  if constexpr (std::is_floating_point_v<T>)  // from_chars reads "nan", "inf" and overflows to inf
-    if (!std::isfinite(value)) fail("option {}: '{}' is not a finite number", flag_name, word);
+  if (const std::string problem = number_word_problem(word, value); !problem.empty())
+    fail("option {}: {}", flag_name, problem);
   return value;
 }
 
