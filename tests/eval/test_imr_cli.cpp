@@ -225,6 +225,15 @@ TEST(ImrCli, OptionsAreCheckedBeforeTheModelsAreLoaded) {
   EXPECT_NE(json.output.find((dir / "real.ply/out.json").string() + ": cannot write here"), std::string::npos)
       << json.output;
   EXPECT_EQ(json.output.find("model 0"), std::string::npos) << json.output;
+  // --json in a folder where no file can be created although access() says it can (/proc for root): found by
+  // creating a probe file, before any work (it was found when writing, after the solve and the table).
+  const auto proc = test::run_cli("imr '" + (dir / "real.ply").string() + "' '" + (dir / "real.ply").string() +
+                                  "' --json /proc/d2gs-imr.json");
+  EXPECT_EQ(proc.exit_code, 1) << proc.output;
+  EXPECT_NE(proc.output.find("/proc/d2gs-imr.json: cannot write here: folder /proc is not writable"), std::string::npos)
+      << proc.output;
+  EXPECT_EQ(proc.output.find("model 0"), std::string::npos) << proc.output;
+  EXPECT_EQ(test::count_occurrences(proc.output, "\n"), 1u) << proc.output;
 }
 
 TEST(ImrCli, EmptyModelsAreNamedAndIdenticalModelsSaidSo) {

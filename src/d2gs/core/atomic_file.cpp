@@ -138,6 +138,18 @@ void write_file_atomic_with(const fs::path& path, const std::function<void(const
 
 namespace {
 
+// Why no file can be created in the existing folder `dir`, or empty: a probe file (named as temporary_name()
+// names them, so that remove_stale_temporaries finds one a killed process left) created and removed. access()
+// is not enough: it says yes to root everywhere, and /proc or a read-only mount refuse only at the create.
+std::string create_obstacle(const fs::path& dir) {
+  const fs::path probe = temporary_name(dir / ".d2gs-write-probe");
+  const int fd = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0600);
+  if (fd < 0) return fmt::format("folder {} is not writable ({})", dir.string(), std::strerror(errno));
+  ::close(fd);
+  ::unlink(probe.c_str());
+  return {};
+}
+
 // Why folder `dir` cannot be written to or created, or empty.
 std::string folder_obstacle(const fs::path& dir) {
   if (dir.empty()) return {};  // the working folder
@@ -148,7 +160,7 @@ std::string folder_obstacle(const fs::path& dir) {
     if (!fs::is_directory(path, ec)) return fmt::format("{} exists and is not a folder", path.string());
     if (::access(path.c_str(), W_OK | X_OK) != 0)
       return fmt::format("folder {} is not writable ({})", path.string(), std::strerror(errno));
-    return {};
+    return create_obstacle(path);
   }
   // Neither there nor creatable: a loop of symbolic links, or a link to nothing (create_directories fails
   // on both, after the work).
@@ -160,7 +172,7 @@ std::string folder_obstacle(const fs::path& dir) {
       if (!fs::is_directory(a, ec)) return fmt::format("{} is a file, not a folder", a.string());
       if (::access(a.c_str(), W_OK | X_OK) != 0)
         return fmt::format("folder {} is not writable ({})", a.string(), std::strerror(errno));
-      return {};
+      return create_obstacle(a);
     }
     if (a == a.parent_path()) return {};
   }

@@ -58,8 +58,9 @@ void write_file_atomic(const std::filesystem::path& path, std::string_view bytes
 void write_file_atomic_with(const std::filesystem::path& path,
                             const std::function<void(const std::filesystem::path&)>& write);
 // Checks, before a command does its work, that it will be able to write its outputs: `dir` is a folder,
-// or can be created as one (its nearest existing ancestor is a writable folder, not a file). Throws
-// d2gs::Error naming `dir` and the obstacle otherwise. Creates nothing.
+// or can be created as one (its nearest existing ancestor is a writable folder, not a file), and a file can be
+// created in that folder (tried with a probe file, removed at once: /proc or a read-only mount refuse only
+// there). Throws d2gs::Error naming `dir` and the obstacle otherwise. Leaves nothing behind.
 void check_output_folder(const std::filesystem::path& dir);
 // The same for a file to be written: its folder is checked as above, and `file` is not a folder.
 void check_output_file(const std::filesystem::path& file);
