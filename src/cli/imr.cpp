@@ -33,6 +33,9 @@ namespace d2gs::cli {
 namespace {
 namespace fs = std::filesystem;
 
+// The smallest --epsilon on the mean-normalised cost (docs/imr.md).
+constexpr double kMinNormalizedEpsilon = 1e-6;
+
 struct ImrCommandOptions {
   std::vector<std::string> inputs;
   std::string source;
@@ -178,6 +181,10 @@ int run_imr(const ImrCommandOptions& o) {
   else fail("option --solver must be kernel or log-domain (got '{}')", o.solver);
   if (o.inputs.size() < 2) fail("imr needs at least 2 models, got {}", o.inputs.size());
   if (!(o.epsilon > 0.0) || !std::isfinite(o.epsilon)) fail("option --epsilon must be positive (got {})", o.epsilon);
+  // On the cost divided by its mean, a smaller ε is below what the float cost and kernel resolve: the solve would
+  // stop in rounding on a plan that is no solution.
+  if (!o.no_normalize && o.epsilon < kMinNormalizedEpsilon)
+    fail("option --epsilon must be ≥ {:g} on the mean-normalised cost (got {:g})", kMinNormalizedEpsilon, o.epsilon);
   if (!(o.tolerance >= 0.0) || !std::isfinite(o.tolerance))
     fail("option --tolerance must be ≥ 0 (got {})", o.tolerance);
   if (!(o.marginal_tolerance >= 0.0) || !std::isfinite(o.marginal_tolerance))
@@ -306,7 +313,13 @@ int run_imr(const ImrCommandOptions& o) {
     if (identical(p.a, p.b)) std::printf("  (identical models)");
     std::printf("\n");
     same += identical(p.a, p.b) ? 1 : 0;
-    if (!t.converged) {
+    if (!t.converged && t.iterations < o.max_iterations) {
+      ++unconverged;
+      spdlog::warn(
+          "imr: pair {}-{} did not converge: its plan's marginal error {:.3g} is above {:g} (the stopping "
+          "rule was met in rounding: choose a larger --epsilon); its S is meaningless",
+          p.a, p.b, t.marginal_error, kMaxConvergedMarginalError);
+    } else if (!t.converged) {
       ++unconverged;
       spdlog::warn("imr: pair {}-{} did not converge: stopped at --max-iterations {} with a potential change of {:.3g} "
                    "(tolerance {:.3g}) and a marginal error of {:.3g}; its S is approximate{}",

@@ -205,6 +205,8 @@ TEST(ImrCli, OptionsAreCheckedBeforeTheModelsAreLoaded) {
            {"--strata-phase 18446744073709551616",
             "option --strata-phase: '18446744073709551616' is not a whole number ≥ 0"},
            {"--max-iterations 10 --max-iterations 20", "d2gs: error: imr: --max-iterations given twice\n"},
+           // Below what the float cost resolves: the solve stopped in rounding and said "converged".
+           {"--epsilon 1e-300", "option --epsilon must be ≥ 1e-06 on the mean-normalised cost (got 1e-300)"},
            {"--json ''", "option --json: must not be empty"}}) {
     const auto r = test::run_cli("imr " + models + " " + option);
     EXPECT_EQ(r.exit_code, 1) << option << "\n" << r.output;

@@ -226,6 +226,39 @@ TEST(Sinkhorn, StopsAtMaxIterationsAndReportsIt) {
   EXPECT_GT(r.last_change, o.tolerance);
 }
 
+// An ε far below what the float cost and kernel resolve (d2gs imr --epsilon 1e-300 reported a marginal error of 530
+// as converged): the stopping rule may be met in rounding, but a plan that far from its marginals is not converged.
+TEST(Sinkhorn, APlanFarFromItsMarginalsIsNotConverged) {
+  const Problem p = random_problem(60, 50, 4);
+  const DenseCostMatrix<float> cost = store_cost<float>(DenseCostMatrix<double>(p.n, p.m, p.c), false);
+  int solved = 0;
+  for (const SinkhornMethod method : {SinkhornMethod::StabilizedKernel, SinkhornMethod::LogDomain}) {
+    SinkhornOptions o;
+    o.method = method;
+    o.epsilon = 1e-300;
+    o.epsilon_scaling = true;
+    o.epsilon_factor = 0.25;
+    o.anderson_depth = 10;
+    o.max_iterations = 2000;
+    SinkhornResult r;
+    try {
+      r = sinkhorn(p.a, p.b, cost, o);
+    } catch (const Error&) {
+      continue;  // refusing the problem is an honest answer too
+    }
+    ++solved;
+    EXPECT_GT(r.marginal_error, kMaxConvergedMarginalError) << to_string(method);
+    EXPECT_FALSE(r.converged) << to_string(method) << ": marginal error " << r.marginal_error << " reported converged";
+  }
+  EXPECT_EQ(solved, 2);  // neither solver refuses it: both stop, and neither may call the plan converged
+  // A normal solve is still converged, its marginal error far below the bound.
+  SinkhornOptions normal;
+  normal.epsilon = 0.05;
+  const SinkhornResult ok = sinkhorn(p.a, p.b, cost, normal);
+  EXPECT_TRUE(ok.converged);
+  EXPECT_LT(ok.marginal_error, 1e-2 * kMaxConvergedMarginalError);
+}
+
 TEST(Sinkhorn, ReportsEveryIterationToTheCallback) {
   const Problem p = random_problem(80, 70, 6);
   SinkhornOptions o;

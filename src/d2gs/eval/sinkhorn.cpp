@@ -1037,6 +1037,9 @@ SinkhornResult sinkhorn_kernel(std::span<const double> a, std::span<const double
   }
   result.transport_cost = total;
   result.marginal_error = error;
+  // A plan whose marginals are far from a and b is no solution, whatever the stopping rule said (an ε too small
+  // for the cost's precision: the potentials stop changing in rounding while the plan is wrong).
+  if (!(error <= kMaxConvergedMarginalError)) result.converged = false;
   result.f.resize(n);
   result.g.resize(m);
   for (std::size_t i = 0; i < n; ++i) result.f[i] = eps_prev * phi[i];
@@ -1196,6 +1199,9 @@ SinkhornResult sinkhorn(std::span<const double> a, std::span<const double> b, co
   for (std::size_t j = 0; j < m; ++j) error += std::abs(col_mass[j] - b[j]);
   result.transport_cost = total;
   result.marginal_error = error;
+  // A plan whose marginals are far from a and b is no solution, whatever the stopping rule said (an ε too small
+  // for the cost's precision: the potentials stop changing in rounding while the plan is wrong).
+  if (!(error <= kMaxConvergedMarginalError)) result.converged = false;
   result.f.resize(n);
   result.g.resize(m);
   for (std::size_t i = 0; i < n; ++i) result.f[i] = eps_prev * phi[i];

@@ -141,12 +141,18 @@ struct SinkhornStage {
   double seconds = 0.0;
 };
 
+// The largest L1 marginal error of a plan reported converged (a solve's is below 1e-4 at the default tolerance):
+// above it the stopping rule was met in rounding, not at a solution (e.g. ε 1e-300 on a cost of mean 1).
+inline constexpr double kMaxConvergedMarginalError = 1e-2;
+
 struct SinkhornResult {
   double transport_cost = 0.0;  // ⟨P, C⟩
   double marginal_error = 0.0;  // L1, rows + columns
   double last_change = 0.0;     // max |Δφ|, |Δψ| of the last iteration
   int iterations = 0;           // over all ε stages
-  bool converged = false;       // last stage reached `tolerance` (or `marginal_tolerance`) within `max_iterations`
+  // The last stage reached `tolerance` (or `marginal_tolerance`) within `max_iterations`, and the final plan's
+  // marginal error is at most kMaxConvergedMarginalError.
+  bool converged = false;
   double epsilon = 0.0;         // the final ε
   std::vector<double> f, g;     // dual potentials in cost units (f = εφ, g = εψ)
   std::vector<SinkhornStage> stages;  // one per ε stage run
