@@ -1,5 +1,6 @@
 // d2gs train: sparse-view 3DGS / DropGaussian / D²GS training.
 #include <deque>
+#include <regex>
 #include <string>
 #include <vector>
 
@@ -17,6 +18,30 @@
 #include "d2gs/train/trainer.hpp"
 
 namespace d2gs::cli {
+namespace {
+
+// A range error of validate() on a value that the --config file gave and the command line did not: the file
+// and its key named ("FILE: key 'iterations' must be > 0 (got -5)"), not a flag that was never typed. Other
+// errors are rethrown as they are.
+[[noreturn]] void fail_naming_the_file(const std::string& file, const nlohmann::json& from_file,
+                                       const nlohmann::json& given, const Error& e) {
+  const std::string what = e.what();
+  const auto from_the_file = [&](const std::string& key) { return from_file.contains(key) && !given.contains(key); };
+  std::smatch m;
+  static const std::regex flag(R"(^option (--[a-z0-9-]+)(.*)$)");
+  if (std::regex_match(what, m, flag))
+    for (const TrainOption& o : train_options())
+      if (o.flag() == m[1].str() && from_the_file(o.name)) fail_file(file, "key '{}'{}", o.name, m[2].str());
+  static const std::regex schedule(R"(^(save|checkpoint|test) iteration (.*)$)");
+  if (std::regex_match(what, m, schedule)) {
+    const std::string list = m[1].str() + "_iterations";
+    if (from_the_file(list) || from_the_file("iterations"))
+      fail_file(file, "key '{}': iteration {} (key 'iterations' or --iterations)", list, m[2].str());
+  }
+  throw e;
+}
+
+}  // namespace
 
 Run add_train_command(CLI::App& app) {
   auto* cmd = app.add_subcommand("train", "Train a Gaussian model from the training views of a scene");
@@ -70,6 +95,7 @@ Run add_train_command(CLI::App& app) {
                                                                   : std::vector<std::string>{b.word});
     }
     TrainConfig c;
+    nlohmann::json from_file = nlohmann::json::object();
     if (!config_file->empty()) {
       const nlohmann::json j = read_json_file(*config_file);
       try {
@@ -77,9 +103,17 @@ Run add_train_command(CLI::App& app) {
       } catch (const Error& e) {
         fail_file(*config_file, "{}", e.what());
       }
+      from_file = with_current_names(j);
     }
     // Presets apply over the file; explicit flags apply over both.
     apply_given_options(c, given);
+    if (!config_file->empty()) {
+      try {
+        c.validate();
+      } catch (const Error& e) {
+        fail_naming_the_file(*config_file, from_file, given, e);
+      }
+    }
     // config.json records the scene absolute, so that eval and imr find it from any working folder.
     if (!c.source.empty()) c.source = std::filesystem::absolute(c.source).lexically_normal().string();
     Trainer trainer(c, *resume);

@@ -5,6 +5,7 @@
 
 #include <set>
 #include <string>
+#include <tuple>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -123,6 +124,29 @@ TEST(TrainCli, RangeErrorsNameFlagsThatExist) {
   const auto no = test::run_cli(fmt::format("train -s '{}' -m '{}' --no-dafe --no-dd-use-layers --method d2gs "
                                             "--dafe-lambda -1", fern, (dir / "run").string()));
   EXPECT_NE(no.output.find("option --dafe-lambda must be ≥ 0 (got -1)"), std::string::npos) << no.output;
+}
+
+// A bad value of a --config file is said with the file and its key, not under a flag that was not typed
+// ("option --iterations must be > 0"); a flag that was typed is still named as a flag.
+TEST(TrainCli, RangeErrorsOfAConfigFileNameTheFileAndTheKey) {
+  const auto dir = test::scratch_dir();
+  const std::string fern = (test::shared_data() / "nerf_llff_data/fern").string();
+  const auto file = dir / "config.json";
+  for (const auto& [config, flags, expected] : std::vector<std::tuple<nlohmann::json, std::string, std::string>>{
+           {{{"iterations", -5}}, "", file.string() + ": key 'iterations' must be > 0 (got -5)"},
+           {{{"iterations", nullptr}}, "", file.string() + ": key 'iterations' must be an integer, got null"},
+           {{{"iterations", 20}, {"save_iterations", {100}}},
+            "",
+            file.string() +
+                ": key 'save_iterations': iteration 100 is outside 1..20 (key 'iterations' or --iterations)"},
+           {{{"iterations", 20}}, "--iterations -5", "option --iterations must be > 0 (got -5)"}}) {
+    write_file_atomic(file, config.dump());
+    const auto r = test::run_cli(
+        fmt::format("train -s '{}' -m '{}' --config '{}' {}", fern, (dir / "run").string(), file.string(), flags));
+    EXPECT_EQ(r.exit_code, 1) << config.dump() << "\n" << r.output;
+    EXPECT_EQ(r.output, "d2gs: error: " + expected + "\n") << config.dump();
+    EXPECT_FALSE(std::filesystem::exists(dir / "run")) << config.dump();
+  }
 }
 
 // --regularisers: a list of names on the command line and in config.json; "none" is the empty list.

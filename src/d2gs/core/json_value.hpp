@@ -35,6 +35,10 @@ inline std::string shown(const nlohmann::json& v) {
   if (s.size() > 40) s = s.substr(0, 37) + "...";
   return s;
 }
+// The value with its type, as in "got string \"5\"" (null, which is both: "got null").
+inline std::string typed(const nlohmann::json& v) {
+  return v.is_null() ? "null" : fmt::format("{} {}", v.type_name(), shown(v));
+}
 }  // namespace json_detail
 
 // `value` as a T (an integral or floating type) in [min, max].
@@ -47,8 +51,7 @@ T json_number(const nlohmann::json& value, std::string_view key, T min = std::nu
   };
   if constexpr (std::is_integral_v<T>) {
     if (value.is_number_float()) fail("key '{}' must be an integer, got {}", key, json_detail::shown(value));
-    if (!value.is_number_integer())
-      fail("key '{}' must be an integer, got {} {}", key, value.type_name(), json_detail::shown(value));
+    if (!value.is_number_integer()) fail("key '{}' must be an integer, got {}", key, json_detail::typed(value));
     // nlohmann stores non-negative integers as unsigned, negative ones as signed 64-bit.
     const auto take = [&](auto v) {
       if (!std::in_range<T>(v) || std::cmp_less(v, min) || std::cmp_greater(v, max)) out_of_range();
@@ -56,7 +59,7 @@ T json_number(const nlohmann::json& value, std::string_view key, T min = std::nu
     };
     return value.is_number_unsigned() ? take(value.get<std::uint64_t>()) : take(value.get<std::int64_t>());
   } else {
-    if (!value.is_number()) fail("key '{}' must be a number, got {} {}", key, value.type_name(), json_detail::shown(value));
+    if (!value.is_number()) fail("key '{}' must be a number, got {}", key, json_detail::typed(value));
     const double d = value.get<double>();
     if (!std::isfinite(d)) fail("key '{}' must be a finite number, got {}", key, json_detail::shown(value));
     if (d < static_cast<double>(min) || d > static_cast<double>(max)) out_of_range();
@@ -68,7 +71,7 @@ T json_number(const nlohmann::json& value, std::string_view key, T min = std::nu
 template <typename T>
 std::vector<T> json_number_list(const nlohmann::json& value, std::string_view key,
                                 T min = std::numeric_limits<T>::lowest(), T max = std::numeric_limits<T>::max()) {
-  if (!value.is_array()) fail("key '{}' must be a list of numbers, got {} {}", key, value.type_name(), json_detail::shown(value));
+  if (!value.is_array()) fail("key '{}' must be a list of numbers, got {}", key, json_detail::typed(value));
   std::vector<T> out;
   out.reserve(value.size());
   for (std::size_t i = 0; i < value.size(); ++i)
