@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cstring>
+#include <functional>
 
 #include <fmt/format.h>
 
@@ -217,6 +218,21 @@ TEST(Checkpoint, ResumeRules) {
   EXPECT_EQ(refused(r), "c.bin: cannot resume: its camera queue names training view position 1 of 3");
   c.state.camera_stack = {};
   EXPECT_EQ(check_resume("c.bin", c, r, 100), "");
+}
+
+// A state no run can be in is refused naming the field (it said "impossible state (iteration 10, ...)" alone).
+TEST(Checkpoint, AnImpossibleStateNamesItsField) {
+  const RunIdentity r = identity();
+  for (const auto& [change, expected] : std::vector<std::pair<std::function<void(TrainingState&)>, std::string>>{
+           {[](TrainingState& s) { s.adam_step = -1; }, "adam_step -1 is negative"},
+           {[](TrainingState& s) { s.iteration = -3; }, "iteration -3 is negative"},
+           {[](TrainingState& s) { s.iterations = 0; }, "--iterations 0 is below 1"},
+           {[](TrainingState& s) { s.active_sh = 2; }, "active SH degree 2 is outside 0..1"}}) {
+    TrainingState s = state();
+    change(s);
+    const std::string message = test::error_of([&] { (void)decode_checkpoint(encode_checkpoint(r, s), "c.bin"); });
+    EXPECT_EQ(message.rfind("c.bin: damaged checkpoint: impossible state: " + expected + " (", 0), 0u) << message;
+  }
 }
 
 // A format-2 checkpoint (d2gs before the methods seam): D²GS's density cache and DAFE masks sat at fixed

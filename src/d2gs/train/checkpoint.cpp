@@ -385,10 +385,18 @@ Checkpoint decode_checkpoint(std::string_view bytes, const fs::path& source) {
   } catch (const std::exception& e) {
     fail_file(source, "damaged checkpoint header ({})", e.what());
   }
-  if (s.iteration < 0 || s.iterations < 1 || s.adam_step < 0 || sh_degree < 0 || sh_degree > kMaxShDegree ||
-      s.active_sh < 0 || s.active_sh > sh_degree)
-    fail_file(source, "damaged checkpoint: impossible state (iteration {}, --iterations {}, SH degree {} of {})", s.iteration,
-              s.iterations, s.active_sh, sh_degree);
+  // An impossible state: the field that makes it so.
+  const auto impossible = [&](const std::string& what) {
+    fail_file(source, "damaged checkpoint: impossible state: {} (iteration {}, --iterations {}, SH degree {} of {})",
+              what, s.iteration, s.iterations, s.active_sh, sh_degree);
+  };
+  if (s.iteration < 0) impossible(fmt::format("iteration {} is negative", s.iteration));
+  if (s.iterations < 1) impossible(fmt::format("--iterations {} is below 1", s.iterations));
+  if (s.adam_step < 0) impossible(fmt::format("adam_step {} is negative", s.adam_step));
+  if (sh_degree < 0 || sh_degree > kMaxShDegree)
+    impossible(fmt::format("SH degree {} is outside 0..{}", sh_degree, kMaxShDegree));
+  if (s.active_sh < 0 || s.active_sh > sh_degree)
+    impossible(fmt::format("active SH degree {} is outside 0..{}", s.active_sh, sh_degree));
 
   // The arrays.
   BodyReader r{bytes.substr(pos, static_cast<std::size_t>(body_bytes)), 0, source};
