@@ -400,7 +400,7 @@ TEST(ExperimentRuns, FailingRunIsReportedAndTheOthersFinish) {
   EXPECT_EQ(code, 1) << out;
   EXPECT_NE(out.find("1 trained, 0 skipped, 1 failed"), std::string::npos) << out;
   EXPECT_NE(out.find("run 1 fern__3v__d2gs-broken__seed0: exit code 1: d2gs: error: "), std::string::npos) << out;
-  EXPECT_NE(out.find("DAFE prior missing"), std::string::npos) << out;
+  EXPECT_NE(out.find((dir / "no-priors").string() + ": --dafe-prior: no such folder"), std::string::npos) << out;
   EXPECT_NE(out.find("d2gs: error: experiment tiny: 1 of 2 runs failed"), std::string::npos) << out;
   EXPECT_TRUE(fs::is_regular_file(dir / "exp/runs/fern/3v/3dgs/seed0/results.json"));
   const std::string md = read_file(dir / "exp/tables/results.md");

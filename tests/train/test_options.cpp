@@ -149,6 +149,21 @@ TEST(TrainCli, RangeErrorsOfAConfigFileNameTheFileAndTheKey) {
   }
 }
 
+// --dafe-prior naming no folder: said so, not as the first view's missing map ("dp/nothere/image001.npy: DAFE
+// prior missing").
+TEST(TrainCli, DafePriorFolderThatDoesNotExistIsSaidSo) {
+  const auto dir = test::scratch_dir();
+  const std::string fern = (test::shared_data() / "nerf_llff_data/fern").string();
+  const auto prior =
+      test::run_cli(fmt::format("-q train -s '{}' -m '{}' -r 8 --n-views 3 --init random --iterations 1 "
+                                "--device cpu --method d2gs --dafe-prior '{}'",
+                                fern, (dir / "run").string(), (dir / "nothere").string()));
+  EXPECT_EQ(prior.exit_code, 1) << prior.output;
+  EXPECT_NE(prior.output.find("d2gs: error: " + (dir / "nothere").string() + ": --dafe-prior: no such folder\n"),
+            std::string::npos)
+      << prior.output;
+}
+
 // --regularisers: a list of names on the command line and in config.json; "none" is the empty list.
 TEST(TrainOptions, RegularisersAreAListOfNames) {
   const TrainOption* o = find_train_option("regularisers");

@@ -178,6 +178,12 @@ private:
     // never averaged into the valid depths when the map is resized (PatchMatch's maps are at the scene
     // folder's highest resolution).
     const bool depth = dafe_.prior_kind == PriorKind::Depth;
+    // The folder itself first: its absence is not one view's missing map.
+    std::error_code ec;
+    if (!std::filesystem::is_directory(dafe_.prior, ec))
+      fail_file(dafe_.prior, "--dafe-prior: {}",
+                std::filesystem::exists(dafe_.prior, ec) ? "not a folder (expected the folder of the prior maps)"
+                                                         : "no such folder");
     for (std::size_t k = 0; k < run.split.train.size(); ++k) {
       const Camera& cam = run.scene.cameras[static_cast<std::size_t>(run.split.train[k])];
       const Image prior = read_view_map(dafe_.prior, cam, {.what = "DAFE prior", .shape = "map", .zero_is_none = depth});
