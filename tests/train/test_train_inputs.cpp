@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <cstdint>
+#include <functional>
 #include <string>
 
 #include <fmt/format.h>
@@ -262,6 +263,36 @@ TEST(TrainCli, EvalKeepsFilesItDidNotWriteInTheRenderFolder) {
   const auto ok = test::run_cli(fmt::format("-q eval -m '{}'", run.string()));
   EXPECT_EQ(ok.exit_code, 0) << ok.output;
   EXPECT_TRUE(fs::is_regular_file(ours / "renders/image000.png"));
+}
+
+// eval reads the options back from the run's config.json: a value edited out of its range, or a file that is
+// not a run's, is an error naming the file and the key (it used to be scored with whatever it held).
+TEST(TrainCli, EvalRefusesAnEditedConfigJson) {
+  const auto dir = test::scratch_dir();
+  const fs::path run = dir / "run";
+  const auto t = test::run_cli(fmt::format("-q train -s '{}' -m '{}' -r 8 --n-views 3 --init random --random-points 300 "
+                                           "--iterations 2", fern(), run.string()));
+  ASSERT_EQ(t.exit_code, 0) << t.output;
+  const std::string original = read_file(run / "config.json");
+  const auto edited = [&](const std::function<void(nlohmann::json&)>& edit, const std::string& expected) {
+    nlohmann::json j = nlohmann::json::parse(original);
+    edit(j);
+    fs::remove(run / "config.json");
+    write_file_atomic(run / "config.json", j.dump(2));
+    const auto e = test::run_cli(fmt::format("-q eval -m '{}'", run.string()));
+    EXPECT_EQ(e.exit_code, 1) << e.output;
+    EXPECT_NE(e.output.find("d2gs: error: " + (run / "config.json").string() + ": " + expected), std::string::npos)
+        << e.output;
+    EXPECT_EQ(test::count_occurrences(e.output, "\n"), 1u) << e.output;
+  };
+  edited([](nlohmann::json& j) { j["n_views"] = -1; }, "key 'n_views' must be");
+  edited([](nlohmann::json& j) { j["sh_degree"] = 9; }, "key 'sh_degree' must be");
+  edited([](nlohmann::json& j) { j.erase("method"); }, "key 'method' is missing");
+  edited([](nlohmann::json& j) { j["method"] = "4dgs"; }, "");
+  fs::remove(run / "config.json");
+  write_file_atomic(run / "config.json", original);
+  const auto ok = test::run_cli(fmt::format("-q eval -m '{}'", run.string()));
+  EXPECT_EQ(ok.exit_code, 0) << ok.output;
 }
 
 // A test view that cannot be decoded is found before training, not after the model is saved (when the run

@@ -58,10 +58,24 @@ SplitOptions split_options(const TrainConfig& c) {
 }
 
 void take_recorded_run_config(TrainConfig& c, const nlohmann::json& recorded) {
+  if (!recorded.is_object()) fail("is not a JSON object of a run's options");
+  for (const char* key : {"method", "source"})
+    if (!recorded.contains(key)) fail("key '{}' is missing: not the config.json of a d2gs train run", key);
   update_from_json(c, recorded, RecordedKeys::Ignore);
   const nlohmann::json current = with_current_names(recorded);  // former names counted as present
   for (const TrainOption& o : train_options())
     if (!o.absent_means.is_null() && !current.contains(o.name)) o.set(c, o.absent_means);
+  // The ranges d2gs train checked when it wrote the file: a value outside them was edited in since.
+  check_method_name(c.method);
+  for (const TrainOption& o : train_options()) {
+    try {
+      o.check(c);
+    } catch (const Error& e) {  // "option --n-views must be ≥ 1 (got -1)" → "key 'n_views' must be ≥ 1 (got -1)"
+      const std::string what = e.what(), flag = "option " + o.flag();
+      if (what.starts_with(flag)) fail("key '{}'{}", o.name, what.substr(flag.size()));
+      fail("key '{}': {}", o.name, what);
+    }
+  }
 }
 
 std::string absolute_path(const std::string& p) {

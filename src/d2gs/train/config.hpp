@@ -143,7 +143,9 @@ enum class RecordedKeys { Refuse, Ignore };
 void update_from_json(TrainConfig& c, const nlohmann::json& j, RecordedKeys recorded = RecordedKeys::Refuse);
 
 // A run's recorded config.json `recorded`, read into `c`: the options it lacks take the value the run
-// was trained with (options.hpp, value_when_absent: a default changed since is not what it used).
+// was trained with (options.hpp, value_when_absent: a default changed since is not what it used). Throws
+// d2gs::Error (callers prefix the file's name) when `method` or `source` is missing, or a value is of the
+// wrong type or outside its option's range (as d2gs train checks them).
 void take_recorded_run_config(TrainConfig& c, const nlohmann::json& recorded);
 
 // `p` absolute, with the links and dot segments of its existing part resolved (std::filesystem's weakly
