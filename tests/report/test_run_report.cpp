@@ -153,6 +153,14 @@ TEST(ReportCli, MistypedValuesInTheRunsFilesNameTheFileAndTheKey) {
   test::make_fake_run(dir / "event");
   std::ofstream(dir / "event/train_log.jsonl") << "{\"iteration\":1,\"event\":7}\n{\"iteration\":2}\n";
   expect_error("event", "train_log.jsonl: line 1: 'event' must be a string");
+  test::make_fake_run(dir / "results");
+  fs::remove(dir / "results/results.json");
+  std::ofstream(dir / "results/results.json") << "{\"mean\": 5}";
+  expect_error("results", "results.json: key 'mean' must be an object, got 5");
+  test::make_fake_run(dir / "results_list");
+  fs::remove(dir / "results_list/results.json");
+  std::ofstream(dir / "results_list/results.json") << "[]";
+  expect_error("results_list", "results.json: is not a JSON object of results");
   // A split that is no object and an oracle flag that is no boolean are shown as unknown, not an error.
   edit_config("odd", "split", 3);
   nlohmann::json c = nlohmann::json::parse(read_file(dir / "odd/config.json"));

@@ -206,7 +206,14 @@ RunData load_run(const fs::path& dir, const RunLoadOptions& options) {
   if (!fs::is_directory(dir, ec)) fail_file(dir, "no such run folder");
   if (!fs::is_regular_file(dir / "config.json")) fail_file(dir, "not a run folder (no config.json)");
   r.config = read_json_file(dir / "config.json");
-  if (fs::is_regular_file(dir / "results.json")) r.results = read_json_file(dir / "results.json");
+  if (fs::is_regular_file(dir / "results.json")) {
+    r.results = read_json_file(dir / "results.json");
+    // What d2gs eval writes: an object whose "mean" (and "per_view" entries) are objects of metrics.
+    if (!r.results.is_object()) fail_file(dir / "results.json", "is not a JSON object of results");
+    for (const char* key : {"mean", "per_view"})
+      if (r.results.contains(key) && !r.results[key].is_object())
+        fail_file(dir / "results.json", "key '{}' must be an object, got {}", key, json_detail::shown(r.results[key]));
+  }
   if (fs::is_regular_file(dir / "train_log.jsonl")) r.log = read_train_log(dir / "train_log.jsonl");
 
   const std::regex iteration_re("iteration_([0-9]{1,9})");
